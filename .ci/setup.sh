@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# One-command set-up on Debian 12 (bookworm), run as root (or with sudo):
+#   Debian packages for dolfinx 0.5.2 + PETSc + MPI + Numba, then a virtual environment
+#   .venv made from /usr/bin/python3 with --system-site-packages (so it sees dolfinx),
+#   with fcm_fsi installed in editable mode.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export DEBIAN_FRONTEND=noninteractive
+PKGS="python3-dolfinx-real python3-petsc4py python3-mpi4py python3-gmsh python3-numba
+      python3-meshio python3-h5py python3-yaml python3-scipy python3-matplotlib python3-pytest
+      python3-venv python3-setuptools python3-pip openmpi-bin"
+missing=$(dpkg-query -W -f='${Package} ${Status}\n' $PKGS 2>/dev/null | grep -vc 'install ok installed' || true)
+if [ "$missing" != "0" ] || ! dpkg-query -W $PKGS >/dev/null 2>&1; then
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends $PKGS >/dev/null
+fi
+if [ ! -x .venv/bin/python ]; then
+  /usr/bin/python3 -m venv --system-site-packages .venv
+fi
+.venv/bin/python -m pip install -q --no-deps --no-build-isolation -e .
+.venv/bin/python -c "import dolfinx, numba, fcm_fsi; print('fcm_fsi set up: dolfinx', dolfinx.__version__, 'numba', numba.__version__)"

@@ -1,0 +1,61 @@
+"""The whole case file: one frozen dataclass per section."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from .dem import DEMConfig
+from .fields import param
+from .fluid import FluidConfig
+from .loader import ConfigError, apply_override, build, read_yaml
+from .mesh import MeshConfig
+from .output import OutputConfig
+from .phase_field import PhaseFieldConfig
+from .run import RunConfig
+
+
+@dataclass(frozen=True, kw_only=True)
+class Case:
+    """A simulation case. Which physics run follows from which sections are present."""
+
+    name: str = param(doc="case name, used in logs and output")
+    description: str = param("", doc="free text")
+    run: RunConfig = param(doc="time stepping and reporting")
+    mesh: MeshConfig | None = param(None, doc="background mesh (required with fluid or phase_field)")
+    phase_field: PhaseFieldConfig | None = param(None, doc="free surface / advected interface")
+    fluid: FluidConfig | None = param(None, doc="Navier–Stokes fluid")
+    dem: DEMConfig | None = param(None, doc="discrete-element blocks")
+    output: OutputConfig = param(default_factory=OutputConfig, doc="output settings")
+
+    def __post_init__(self) -> None:
+        if self.phase_field is None and self.fluid is None and self.dem is None:
+            raise ConfigError("the case has no physics: give at least one of phase_field, fluid, dem")
+        if (self.phase_field is not None or self.fluid is not None) and self.mesh is None:
+            raise ConfigError("key 'mesh' is required when phase_field or fluid is given")
+        pf = self.phase_field
+        if pf is not None and self.fluid is None and pf.velocity is None:
+            raise ConfigError("key 'phase_field.velocity' is required when there is no fluid section")
+
+    @property
+    def physics(self) -> str:
+        """Driver name: 'phase_field', 'fluid', 'dem' or 'coupled'."""
+        if self.dem is not None and self.fluid is not None:
+            return "coupled"
+        if self.fluid is not None:
+            return "fluid"
+        if self.phase_field is not None:
+            return "phase_field"
+        return "dem"
+
+
+def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
+    """Load and validate a case file, applying ``key.path=value`` overrides."""
+    data = read_yaml(Path(path))
+    for assignment in overrides:
+        apply_override(data, assignment)
+    return build(Case, data, source=str(path))
+
+
+def case_from_dict(data: dict, source: str = "<dict>") -> Case:
+    """Build a case from a mapping (tests and the verification runner)."""
+    return build(Case, data, source=source)

@@ -1,0 +1,45 @@
+"""The fixed background mesh (section ``mesh``)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from .fields import param
+from .loader import ConfigError
+
+
+@dataclass(frozen=True, kw_only=True)
+class RefineZone:
+    """A box where gmsh uses a smaller cell size (e.g. near a free surface)."""
+
+    lower: tuple[float, ...] = param(unit="m", doc="lower corner of the zone")
+    upper: tuple[float, ...] = param(unit="m", doc="upper corner of the zone")
+    size: float = param(unit="m", doc="cell size inside the zone", gt=0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MeshConfig:
+    """Structured rectangle/box meshes from dolfinx, or gmsh meshes (generated and cached, or a file)."""
+
+    kind: Literal["rectangle", "box", "gmsh_box", "gmsh_file"] = param(doc="rectangle/box: structured simplices; gmsh_box: unstructured gmsh box/rectangle with refine zones; gmsh_file: a .msh file")
+    lower: tuple[float, ...] = param((0.0, 0.0), unit="m", doc="lower corner of the domain (2 or 3 numbers)")
+    upper: tuple[float, ...] = param((1.0, 1.0), unit="m", doc="upper corner of the domain (2 or 3 numbers)")
+    cells: tuple[int, ...] = param((32, 32), doc="cells per direction for rectangle/box", ge=1)
+    size: float = param(0.05, unit="m", doc="target cell size for gmsh_box", gt=0)
+    refine: tuple[RefineZone, ...] = param(default_factory=tuple, doc="gmsh_box refine zones")
+    file: str = param("", doc="path of a gmsh .msh file for gmsh_file (relative to the case file)")
+    diagonal: Literal["right", "left", "crossed"] = param("right", doc="triangle diagonal for rectangle meshes")
+
+    def __post_init__(self) -> None:
+        if len(self.lower) not in (2, 3) or len(self.upper) != len(self.lower):
+            raise ConfigError("key 'mesh.lower'/'mesh.upper' must both have 2 (2D) or 3 (3D) entries")
+        if any(u <= l for l, u in zip(self.lower, self.upper)):
+            raise ConfigError(f"key 'mesh.upper' = {list(self.upper)} must exceed mesh.lower = {list(self.lower)} in every direction")
+        if self.kind in ("rectangle", "box") and len(self.cells) != len(self.lower):
+            raise ConfigError(f"key 'mesh.cells' must have {len(self.lower)} entries, one per direction")
+        if self.kind == "gmsh_file" and not self.file:
+            raise ConfigError("key 'mesh.file' is required when mesh.kind = 'gmsh_file'")
+
+    @property
+    def dim(self) -> int:
+        return len(self.lower)

@@ -1,0 +1,1 @@
+"""Verification runner: python -m fcm_fsi.verify NAME --level quick|full."""

@@ -1,0 +1,100 @@
+"""Registry of verification cases and the Metric record they return.
+
+A case is a function ``run(level, out_dir, comm) -> list[Metric]`` registered with
+:func:`register`. It runs on every rank of ``comm``; rank 0 writes plots into
+``out_dir``. Modules in ``fcm_fsi/verify/cases/`` are imported automatically.
+"""
+from __future__ import annotations
+
+import importlib
+import math
+import pkgutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Literal
+
+Level = Literal["quick", "full"]
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One measured number against its reference and pass criterion."""
+
+    key: str
+    value: float
+    reference: float | None
+    tolerance: float | None
+    unit: str
+    passed: bool
+    criterion: str
+
+    def as_json(self) -> dict:
+        def clean(x):
+            return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else x
+        return {"value": clean(self.value), "reference": clean(self.reference),
+                "tolerance": clean(self.tolerance), "unit": self.unit, "pass": bool(self.passed),
+                "criterion": self.criterion}
+
+
+def _f(x: float) -> float:
+    return float(x)
+
+
+def rel_error_metric(key: str, value: float, reference: float, rel_tol: float, unit: str = "-") -> Metric:
+    """Value within ``rel_tol`` (relative) of a reference."""
+    err = abs(value - reference) / abs(reference)
+    return Metric(key, _f(value), _f(reference), _f(rel_tol), unit, bool(err <= rel_tol),
+                  f"|value - ref|/|ref| = {err:.3g} <= {rel_tol:g}")
+
+
+def at_most(key: str, value: float, limit: float, unit: str = "-", reference: float | None = 0.0) -> Metric:
+    """An error measure that must not exceed ``limit``."""
+    return Metric(key, _f(value), reference, _f(limit), unit, bool(value <= limit), f"value <= {limit:g}")
+
+
+def at_least(key: str, value: float, limit: float, unit: str = "-", reference: float | None = None) -> Metric:
+    """A quantity (e.g. an observed order) that must reach ``limit``."""
+    return Metric(key, _f(value), reference, _f(limit), unit, bool(value >= limit), f"value >= {limit:g}")
+
+
+def in_interval(key: str, value: float, lo: float, hi: float, unit: str = "-", reference: float | None = None) -> Metric:
+    """A quantity that must lie in [lo, hi]."""
+    return Metric(key, _f(value), reference, None, unit, bool(lo <= value <= hi), f"{lo:g} <= value <= {hi:g}")
+
+
+def report_only(key: str, value: float, unit: str = "-", reference: float | None = None, note: str = "reported") -> Metric:
+    """A number reported with no pass band (always passes; say why in ``note``)."""
+    return Metric(key, _f(value), reference, None, unit, True, note)
+
+
+RunFn = Callable[[Level, Path, object], list[Metric]]
+
+
+@dataclass(frozen=True)
+class VerificationCase:
+    name: str
+    description: str
+    issue: int
+    run: RunFn
+    default_ranks: int = 1
+
+
+REGISTRY: dict[str, VerificationCase] = {}
+
+
+def register(name: str, description: str, issue: int, default_ranks: int = 1) -> Callable[[RunFn], RunFn]:
+    """Decorator adding a verification case to the registry."""
+    def wrap(fn: RunFn) -> RunFn:
+        if name in REGISTRY:
+            raise RuntimeError(f"verification case {name!r} registered twice")
+        REGISTRY[name] = VerificationCase(name, description, issue, fn, default_ranks)
+        return fn
+    return wrap
+
+
+def load_all() -> dict[str, VerificationCase]:
+    """Import every module of ``fcm_fsi.verify.cases`` so their cases register."""
+    from . import cases
+    for mod in pkgutil.iter_modules(cases.__path__):
+        importlib.import_module(f"{cases.__name__}.{mod.name}")
+    return REGISTRY
