@@ -2,13 +2,83 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 from .fields import param
+from .loader import ConfigError
+
+
+def _default_petsc() -> dict:
+    """Direct LU (MUMPS) for the monolithic system: the default for small 2D cases."""
+    return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
+
+
+@dataclass(frozen=True, kw_only=True)
+class BoundaryCondition:
+    """One boundary condition on the mesh boundary called ``boundary``.
+
+    Boundary names come from the mesh: ``left/right/bottom/top/front/back`` for the
+    rectangle/box meshes, the gmsh physical names (e.g. ``inlet``, ``outlet``, ``walls``,
+    ``cylinder``) for gmsh meshes.
+    """
+
+    boundary: str = param(doc="name of the mesh boundary")
+    kind: Literal["velocity", "parabolic_inflow", "no_slip", "slip", "do_nothing"] = param(
+        doc="velocity: u = value; parabolic_inflow: u = max_speed·Π 4s(L−s)/L² along the inward normal "
+            "(s across the boundary's bounding box); no_slip: u = 0; slip: u·n = 0 on an axis-aligned "
+            "boundary; do_nothing: natural outflow (σ·n = 0)")
+    value: tuple[float, ...] = param((0.0, 0.0), unit="m/s", doc="velocity vector for kind = velocity")
+    max_speed: float = param(1.0, unit="m/s", doc="centre-line speed of the parabolic inflow", ge=0)
+    ramp_time: float = param(0.0, unit="s", doc="velocity/parabolic inflow ramped by (1 − cos(π t/ramp))/2 "
+                                               "for t < ramp_time (0 = no ramp)", ge=0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class StabilizationConfig:
+    """Switches of the residual-based terms of eq 5 (τ from eqs 6–10)."""
+
+    supg: bool = param(True, doc="streamline-upwind Petrov–Galerkin term (τ_supg, eq 6)")
+    pspg: bool = param(True, doc="pressure-stabilizing term (τ_pspg = τ_supg, eq 7); needed for P1/P1")
+    lsic: bool = param(True, doc="least-squares incompressibility term (τ_cont, eqs 8–10)")
+    time_term: bool = param(True, doc="include (2/Δt)² in τ_supg (eq 6)")
+    viscous_reconstruction: bool = param(
+        True, doc="in the strong residual use ∇·(2μ G), G = lumped L2 projection of ε(u) onto P1, instead of "
+                  "∇·(2μ ε(u)) which vanishes for P1 (restores consistency, hence 2nd order)")
 
 
 @dataclass(frozen=True, kw_only=True)
 class FluidConfig:
-    """Single- or two-phase incompressible Newtonian fluid."""
+    """Single- or two-phase incompressible Newtonian fluid on P1/P1 (eq 5)."""
 
     density: float = param(1000.0, unit="kg/m^3", doc="density of the (liquid) fluid", gt=0)
     viscosity: float = param(1.0e-3, unit="Pa s", doc="dynamic viscosity of the (liquid) fluid", gt=0)
+    gas_density: float = param(1.2, unit="kg/m^3", doc="density of the second phase (φ = 0) for two-phase runs", gt=0)
+    gas_viscosity: float = param(1.8e-5, unit="Pa s", doc="dynamic viscosity of the second phase (φ = 0)", gt=0)
+    gravity: tuple[float, ...] = param((0.0, 0.0), unit="m/s^2", doc="body force per unit mass f (eq 1), e.g. [0, -9.81]")
+    boundaries: tuple[BoundaryCondition, ...] = param(default_factory=tuple,
+                                                      doc="boundary conditions; boundaries not listed are do-nothing")
+    theta: float = param(0.5, doc="time scheme: 0.5 = Crank–Nicolson, 1 = backward Euler (pseudo-time to steady states)",
+                         ge=0.5, le=1.0)
+    stabilization: StabilizationConfig = param(default_factory=StabilizationConfig, doc="stabilization terms")
+    nonlinear: Literal["newton", "picard"] = param(
+        "newton", doc="newton: exact Jacobian with τ frozen per iteration; picard: advecting velocity frozen (Oseen)")
+    rtol: float = param(1.0e-8, doc="nonlinear stop: ‖R‖ ≤ max(rtol·‖R₀‖, atol) each step", gt=0, lt=1)
+    atol: float = param(1.0e-10, doc="absolute residual tolerance of the nonlinear iteration", gt=0)
+    max_iterations: int = param(25, doc="nonlinear iterations per step before the run stops with an error", ge=1)
+    quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
+    pressure_reference: tuple[float, ...] | None = param(
+        None, unit="m", doc="point where p = 0 is pinned when no boundary is do_nothing (default: mesh lower corner)")
+    petsc: dict = param(default_factory=_default_petsc,
+                        doc="PETSc options of the monolithic (u, p) solve, prefix ns_; e.g. "
+                            "{ksp_type: gmres, pc_type: asm, sub_pc_type: ilu} for large 3D runs")
+
+    def __post_init__(self) -> None:
+        names = [bc.boundary for bc in self.boundaries]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ConfigError(f"key 'fluid.boundaries': boundary {dupes[0]!r} has more than one condition")
+        if len(self.gravity) not in (2, 3):
+            raise ConfigError(f"key 'fluid.gravity' = {list(self.gravity)} must have 2 or 3 entries")
+        for i, bc in enumerate(self.boundaries):
+            if bc.kind == "velocity" and len(bc.value) not in (2, 3):
+                raise ConfigError(f"key 'fluid.boundaries[{i}].value' = {list(bc.value)} must have 2 or 3 entries")

@@ -1,0 +1,394 @@
+"""Stabilized P1/P1 incompressible Navier–Stokes (SPEC §1, paper eqs 1–10).
+
+Weak form (eq 5) with θ-scheme in time (θ = 1/2: Crank–Nicolson):
+
+    u_θ = θ u + (1 − θ) uⁿ,   a = advecting velocity (u_θ for Newton, frozen for Picard)
+    R_M = ρ((u − uⁿ)/Δt + (a·∇)u_θ − f) − ∇·(2μ ε(u_θ)) + ∇p          (strong residual)
+    F(u, p; w, q) = ∫ ρ((u − uⁿ)/Δt + (a·∇)u_θ − f)·w + 2μ ε(u_θ):ε(w) − p ∇·w + q ∇·u
+                  + Σ_e ∫ (τ_supg (a·∇)w + τ_pspg ∇q/ρ)·R_M            (SUPG + PSPG, eqs 6–7)
+                  + Σ_e ∫ τ_cont ρ (∇·w)(∇·u)                          (LSIC, eqs 8–10)
+                  + extra terms (e.g. the finite-cover penalty ∫_Γ p̄ (u − ū)·w dΓ)
+
+τ_supg, τ_cont are cell-wise (DG0) coefficients recomputed from the current iterate
+before every nonlinear iteration (never differentiated), so the forms are polynomial
+and the quadrature degree is set explicitly.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..config.fluid import FluidConfig
+from ..io.logging import get_logger
+from . import solvers
+
+log = get_logger("fluid")
+
+
+class NonlinearSolveError(RuntimeError):
+    """The nonlinear iteration of one time step failed (no convergence or NaN)."""
+
+    def __init__(self, step: int, time: float, residuals: Sequence[float], reason: str) -> None:
+        self.step, self.time, self.residuals = step, time, list(residuals)
+        hist = ", ".join(f"{r:.3e}" for r in residuals)
+        super().__init__(f"Navier–Stokes step {step} (t = {time:.6g} s): {reason}; residual history [{hist}]")
+
+
+@dataclass
+class FormParts:
+    """The symbols a term needs: trial state, previous state, tests, properties, measure."""
+
+    u: ufl.core.expr.Expr          # velocity at t^{n+1}
+    p: ufl.core.expr.Expr          # pressure (at t^{n+1}, acts as p^{n+θ})
+    u_n: ufl.core.expr.Expr        # velocity at t^n
+    u_theta: ufl.core.expr.Expr    # θ u + (1 − θ) uⁿ
+    a: ufl.core.expr.Expr          # advecting velocity
+    w: ufl.core.expr.Expr          # momentum test function
+    q: ufl.core.expr.Expr          # continuity test function
+    rho: ufl.core.expr.Expr        # density (constant or Function)
+    mu: ufl.core.expr.Expr         # dynamic viscosity (constant or Function)
+    f: ufl.core.expr.Expr          # body force per unit mass
+    dt: fem.Constant
+    dx: ufl.Measure
+    tau_supg: fem.Function
+    tau_cont: fem.Function
+    strain: fem.Function | None = None   # P1 reconstruction of ε(u_θ) for the strong residual
+
+
+def epsilon(u):
+    """Rate-of-strain tensor ε(u) (eq 4)."""
+    return ufl.sym(ufl.grad(u))
+
+
+def momentum_residual(s: FormParts):
+    """Strong momentum residual R_M of eq 5.
+
+    ∇·ε(u) of a P1 field vanishes inside cells; with ``s.strain`` (the P1 projection G of
+    ε(u_θ), lagged one nonlinear iteration) the viscous term is ∇·(2μ G) and R_M vanishes
+    for the exact solution up to O(h²).
+    """
+    strain = s.strain if s.strain is not None else epsilon(s.u_theta)
+    return (s.rho * ((s.u - s.u_n) / s.dt + ufl.grad(s.u_theta) * s.a - s.f)
+            - ufl.div(2 * s.mu * strain) + ufl.grad(s.p))
+
+
+def galerkin_residual(s: FormParts):
+    """Galerkin part of eq 5."""
+    return (ufl.inner(s.rho * ((s.u - s.u_n) / s.dt + ufl.grad(s.u_theta) * s.a - s.f), s.w) * s.dx
+            + ufl.inner(2 * s.mu * epsilon(s.u_theta), epsilon(s.w)) * s.dx
+            - s.p * ufl.div(s.w) * s.dx + s.q * ufl.div(s.u) * s.dx)
+
+
+def do_nothing_correction(s: FormParts, ds):
+    """−∫ μ (∇u_θ)ᵀn·w ds on natural boundaries: turns σ·n = 0 of the symmetric form into
+    (μ∇u − pI)·n = 0, the usual do-nothing outflow that Poiseuille flow satisfies."""
+    n = ufl.FacetNormal(s.u.ufl_domain())
+    return -ufl.inner(s.mu * ufl.grad(s.u_theta).T * n, s.w) * ds
+
+
+def supg_pspg_residual(s: FormParts, supg: bool, pspg: bool):
+    """SUPG and PSPG terms of eq 5, τ_pspg = τ_supg (eq 7)."""
+    test = 0
+    if supg:
+        test = test + ufl.grad(s.w) * s.a
+    if pspg:
+        test = test + ufl.grad(s.q) / s.rho
+    if test == 0:
+        return None
+    return s.tau_supg * ufl.inner(test, momentum_residual(s)) * s.dx
+
+
+def lsic_residual(s: FormParts):
+    """Least-squares incompressibility ('τ_cont') term of eq 5."""
+    return s.tau_cont * s.rho * ufl.div(s.w) * ufl.div(s.u) * s.dx
+
+
+def tau_expressions(a, rho, mu, h, dt, time_term: bool):
+    """τ_supg (eq 6) and τ_cont (eqs 8–10) as UFL expressions of cell-wise quantities."""
+    nu = mu / rho
+    speed = ufl.sqrt(ufl.inner(a, a))
+    inv2 = (2 * speed / h) ** 2 + (4 * nu / h ** 2) ** 2
+    if time_term:
+        inv2 = inv2 + (2 / dt) ** 2
+    tau_supg = 1 / ufl.sqrt(inv2)
+    re_e = speed * h / (2 * nu)
+    xi = ufl.conditional(ufl.le(re_e, 3.0), re_e / 3.0, 1.0)
+    tau_cont = h / 2 * speed * xi
+    return tau_supg, tau_cont
+
+
+def cell_size(mesh) -> fem.Function:
+    """Representative element length h_e (DG0): diameter of the disc/ball of the cell's area/volume."""
+    tdim = mesh.topology.dim
+    V0 = fem.FunctionSpace(mesh, ("DG", 0))
+    h = fem.Function(V0, name="h")
+    x = mesh.geometry.x
+    ncells = mesh.topology.index_map(tdim).size_local + mesh.topology.index_map(tdim).num_ghosts
+    nodes = mesh.geometry.dofmap.array.reshape(ncells, -1)[:, : tdim + 1]
+    edges = x[nodes[:, 1:], :tdim] - x[nodes[:, :1], :tdim]
+    vol = np.abs(np.linalg.det(edges)) / (2.0 if tdim == 2 else 6.0)
+    diam = np.sqrt(4 * vol / np.pi) if tdim == 2 else np.cbrt(6 * vol / np.pi)
+    dofs = V0.dofmap.list.array.reshape(ncells, -1)[:, 0]
+    h.x.array[dofs] = diam
+    return h
+
+
+@dataclass
+class StepInfo:
+    """Outcome of one time step."""
+
+    step: int
+    time: float
+    iterations: int
+    residuals: list[float] = field(default_factory=list)
+    krylov_iterations: int = 0
+
+
+ExtraTerm = Callable[[FormParts], "ufl.Form"]
+
+
+class NavierStokes:
+    """Monolithic P1/P1 SUPG/PSPG/LSIC Navier–Stokes solver with a θ-scheme (CN by default).
+
+    Parameters
+    ----------
+    mesh, config: the dolfinx mesh and the ``fluid`` section.
+    dt: time step (s); change later with ``ns.dt.value = ...``.
+    facet_tags, boundary_names: facet MeshTags and name → tag mapping for ``config.boundaries``.
+    rho, mu: density (kg/m³) and dynamic viscosity (Pa s) as UFL expressions or ``fem.Function``s
+        (e.g. ρ(φ), μ(φ)); default the constants of ``config``.
+    dx: integration measure of the volume terms (e.g. a cut-cell quadrature measure).
+    extra_terms: callables ``term(parts) -> ufl.Form`` added to the residual; the Jacobian
+        follows by differentiation (e.g. the finite-cover penalty term of eq 5).
+    extra_bcs: additional ``fem.DirichletBC`` on the mixed space ``ns.W``.
+    velocity_functions: boundary name → ``fn(x, t)`` velocity (gdim × n array), replacing
+        the configured condition there (e.g. an exact solution).
+    petsc_prefix, petsc_options: options prefix of the (u, p) solve and extra options.
+    """
+
+    def __init__(self, mesh, config: FluidConfig, dt: float, *, facet_tags=None,
+                 boundary_names: dict[str, int] | None = None, rho=None, mu=None,
+                 dx: ufl.Measure | None = None, extra_terms: Sequence[ExtraTerm] = (),
+                 extra_bcs: Sequence[fem.DirichletBC] = (),
+                 velocity_functions: dict[str, Callable] | None = None, petsc_prefix: str = "ns_",
+                 petsc_options: dict | None = None) -> None:
+        self.mesh, self.config, self.comm = mesh, config, mesh.comm
+        cell = mesh.ufl_cell()
+        gdim = mesh.geometry.dim
+        self.W = fem.FunctionSpace(mesh, ufl.MixedElement([ufl.VectorElement("Lagrange", cell, 1),
+                                                           ufl.FiniteElement("Lagrange", cell, 1)]))
+        self.V, self.V_map = self.W.sub(0).collapse()
+        self.Q, self.Q_map = self.W.sub(1).collapse()
+        self.U = fem.Function(self.W, name="U")          # (u, p) at t^{n+1}
+        self.U_n = fem.Function(self.W, name="U_n")      # (u, p) at t^n
+        self.u_adv = fem.Function(self.V, name="u_adv")  # advecting velocity for τ (and Picard)
+        self.dt = fem.Constant(mesh, PETSc.ScalarType(dt))
+        self.t, self.step_count = 0.0, 0
+        self.theta = config.theta
+        self.facet_tags, self.boundary_names = facet_tags, dict(boundary_names or {})
+        self.rho = rho if rho is not None else fem.Constant(mesh, PETSc.ScalarType(config.density))
+        self.mu = mu if mu is not None else fem.Constant(mesh, PETSc.ScalarType(config.viscosity))
+        g = tuple(config.gravity) + (0.0,) * max(0, gdim - len(config.gravity))
+        self.f = fem.Constant(mesh, np.asarray(g[:gdim], dtype=PETSc.ScalarType))
+        field_props = isinstance(self.rho, fem.Function) or isinstance(self.mu, fem.Function)
+        q = config.quadrature_degree or (3 if field_props else 2)
+        self.quadrature_degree = q
+        self.dx = dx if dx is not None else ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": q})
+        self.h = cell_size(mesh)
+        V0 = self.h.function_space
+        self.tau_supg = fem.Function(V0, name="tau_supg")
+        self.tau_cont = fem.Function(V0, name="tau_cont")
+
+        self.strain = None
+        if config.stabilization.viscous_reconstruction:
+            T = fem.TensorFunctionSpace(mesh, ("Lagrange", 1))
+            self.strain = fem.Function(T, name="strain_p1")
+            psi = ufl.TestFunction(T)
+            dxp = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": 1})
+            self._strain_lumped = fem.petsc.assemble_vector(
+                fem.form(ufl.inner(ufl.as_matrix([[1.0] * gdim] * gdim), psi) * dxp))
+            self._strain_lumped.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            self._strain_rhs_vec = self._strain_lumped.duplicate()
+            self._strain_pending = psi
+        self.parts = self._parts()
+        if self.strain is not None:
+            self._strain_rhs = fem.form(ufl.inner(epsilon(self.parts.u_theta), self._strain_pending) * dxp)
+        self.residual_ufl = self._residual(extra_terms)
+        dU = ufl.TrialFunction(self.W)
+        self.F_form = fem.form(self.residual_ufl)
+        self.J_form = fem.form(ufl.derivative(self.residual_ufl, self.U, dU))
+        self._tau_exprs = self._tau_interpolation()
+
+        from .boundary import build_bcs  # local import: boundary helpers are fluid-internal
+        self.bc_set = build_bcs(self, config.boundaries, velocity_functions)
+        self.bcs: list[fem.DirichletBC] = self.bc_set.bcs + list(extra_bcs)
+
+        self.A = fem.petsc.create_matrix(self.J_form)
+        self.b = fem.petsc.create_vector(self.F_form)
+        self.dU = fem.Function(self.W)
+        opts = dict(config.petsc)
+        opts.update(petsc_options or {})
+        self.ksp = solvers.make_ksp(self.comm, self.A, petsc_prefix, opts)
+        self.history: list[StepInfo] = []
+
+    # ------------------------------------------------------------------ forms
+    def _parts(self) -> FormParts:
+        u, p = ufl.split(self.U)
+        u_n, _ = ufl.split(self.U_n)
+        w, q = ufl.TestFunctions(self.W)
+        u_theta = self.theta * u + (1 - self.theta) * u_n
+        a = u_theta if self.config.nonlinear == "newton" else self.u_adv
+        return FormParts(u=u, p=p, u_n=u_n, u_theta=u_theta, a=a, w=w, q=q, rho=self.rho, mu=self.mu,
+                         f=self.f, dt=self.dt, dx=self.dx, tau_supg=self.tau_supg, tau_cont=self.tau_cont,
+                         strain=self.strain)
+
+    def _residual(self, extra_terms: Sequence[ExtraTerm]):
+        s, st = self.parts, self.config.stabilization
+        F = galerkin_residual(s)
+        stab = supg_pspg_residual(s, st.supg, st.pspg)
+        if stab is not None:
+            F = F + stab
+        if st.lsic:
+            F = F + lsic_residual(s)
+        ds_nat = self._natural_measure()
+        if ds_nat is not None:
+            F = F + do_nothing_correction(s, ds_nat)
+        for term in extra_terms:
+            F = F + term(s)
+        return F
+
+    def _natural_measure(self):
+        """ds over the boundaries marked do_nothing in the config (None when there are none)."""
+        ids = [self.boundary_names[bc.boundary] for bc in self.config.boundaries
+               if bc.kind == "do_nothing" and bc.boundary in self.boundary_names]
+        if not ids or self.facet_tags is None:
+            return None
+        ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=self.facet_tags,
+                         metadata={"quadrature_degree": self.quadrature_degree})
+        return sum((ds(i) for i in ids[1:]), ds(ids[0]))
+
+    def _tau_interpolation(self):
+        V0 = self.h.function_space
+        pts = V0.element.interpolation_points()
+        ts, tc = tau_expressions(self.u_adv, self.rho, self.mu, self.h, self.dt,
+                                 self.config.stabilization.time_term)
+        return fem.Expression(ts, pts), fem.Expression(tc, pts)
+
+    # ------------------------------------------------------------ time stepping
+    @property
+    def u(self) -> fem.Function:
+        """Velocity at the latest time (a collapsed copy, m/s)."""
+        return self.U.sub(0).collapse()
+
+    @property
+    def p(self) -> fem.Function:
+        """Pressure at the latest time (a collapsed copy, Pa)."""
+        return self.U.sub(1).collapse()
+
+    def set_velocity(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:
+        """Set the initial velocity u(x) (both U and U_n)."""
+        tmp = fem.Function(self.V)
+        tmp.interpolate(fn)
+        for F in (self.U, self.U_n):
+            F.x.array[self.V_map] = tmp.x.array
+            F.x.scatter_forward()
+
+    def update_tau(self) -> None:
+        """Advecting velocity a = θ u^k + (1 − θ) uⁿ, τ_supg and τ_cont cell-wise (eqs 6–10), and
+        the P1 strain reconstruction G of the strong residual (all frozen within one iteration)."""
+        th = self.theta
+        self.u_adv.x.array[:] = (th * self.U.x.array[self.V_map] + (1 - th) * self.U_n.x.array[self.V_map])
+        self.tau_supg.interpolate(self._tau_exprs[0])
+        self.tau_cont.interpolate(self._tau_exprs[1])
+        if self.strain is not None:
+            b = self._strain_rhs_vec
+            with b.localForm() as loc:
+                loc.set(0.0)
+            fem.petsc.assemble_vector(b, self._strain_rhs)
+            b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            b.pointwiseDivide(b, self._strain_lumped)
+            b.copy(self.strain.vector)
+            self.strain.x.scatter_forward()
+
+    def _assemble_residual(self) -> float:
+        with self.b.localForm() as loc:
+            loc.set(0.0)
+        fem.petsc.assemble_vector(self.b, self.F_form)
+        fem.petsc.apply_lifting(self.b, [self.J_form], bcs=[self.bcs], x0=[self.U.vector], scale=-1.0)
+        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fem.petsc.set_bc(self.b, self.bcs, self.U.vector, -1.0)
+        return self.b.norm()
+
+    def _assemble_jacobian(self) -> None:
+        self.A.zeroEntries()
+        fem.petsc.assemble_matrix(self.A, self.J_form, bcs=self.bcs)
+        self.A.assemble()
+
+    def step(self) -> StepInfo:
+        """Advance one time step: uⁿ ← u, t ← t + Δt, nonlinear solve to rtol/atol (collective)."""
+        self.U_n.x.array[:] = self.U.x.array
+        self.t += float(self.dt.value)
+        self.step_count += 1
+        self.bc_set.update(self.t)
+        cfg = self.config
+        info = StepInfo(self.step_count, self.t, 0)
+        r0 = None
+        for it in range(cfg.max_iterations + 1):
+            self.update_tau()
+            r = self._assemble_residual()
+            info.residuals.append(r)
+            if not np.isfinite(r):
+                raise NonlinearSolveError(self.step_count, self.t, info.residuals, "residual is not finite (NaN/inf)")
+            r0 = r if r0 is None else r0
+            if r <= cfg.atol or (it > 0 and r <= cfg.rtol * r0):
+                info.iterations = it
+                self.history.append(info)
+                return info
+            if it == cfg.max_iterations:
+                break
+            self._assemble_jacobian()
+            self.ksp.solve(self.b, self.dU.vector)
+            solvers.check_converged(self.ksp, self.step_count, self.t)
+            info.krylov_iterations += self.ksp.getIterationNumber()
+            self.dU.x.scatter_forward()
+            self.U.x.array[:] -= self.dU.x.array
+        raise NonlinearSolveError(self.step_count, self.t, info.residuals,
+                                  f"no convergence in {cfg.max_iterations} {cfg.nonlinear} iterations "
+                                  f"(rtol {cfg.rtol:g}, atol {cfg.atol:g})")
+
+    def run_to_steady(self, tol: float, max_steps: int) -> int:
+        """March until max|u^{n+1} − uⁿ|/(Δt·max|u|) ≤ tol (1/s, collective); returns the steps taken.
+
+        With θ = 1 and a large Δt this is pseudo-time continuation to a steady state.
+        """
+        for k in range(1, max_steps + 1):
+            self.step()
+            du = self.U.x.array[self.V_map] - self.U_n.x.array[self.V_map]
+            local = (np.abs(du).max(initial=0.0), np.abs(self.U.x.array[self.V_map]).max(initial=0.0))
+            dmax = self.comm.allreduce(local[0], op=MPI.MAX)
+            umax = self.comm.allreduce(local[1], op=MPI.MAX)
+            rate = dmax / (float(self.dt.value) * max(umax, 1e-300))
+            log.debug("steady march step %d: relative change rate %.3e", k, rate)
+            if rate <= tol:
+                return k
+        raise NonlinearSolveError(self.step_count, self.t, [rate],
+                                  f"no steady state within {max_steps} steps (change rate {rate:.3e} > {tol:g})")
+
+    # ---------------------------------------------------------------- helpers
+    def boundary_facets(self, name: str) -> np.ndarray:
+        """Local facet indices of the named boundary."""
+        if self.facet_tags is None or name not in self.boundary_names:
+            raise KeyError(f"unknown boundary {name!r}; known: {sorted(self.boundary_names)}")
+        return self.facet_tags.find(self.boundary_names[name])
+
+    def divergence_l2(self) -> float:
+        """‖∇·u‖_L2 of the current velocity (1/s)."""
+        u, _ = ufl.split(self.U)
+        val = fem.assemble_scalar(fem.form(ufl.div(u) ** 2 * self.dx))
+        return float(np.sqrt(self.comm.allreduce(val, op=MPI.SUM)))

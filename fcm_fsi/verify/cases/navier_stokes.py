@@ -1,0 +1,237 @@
+"""Verification of the stabilized Navier–Stokes solver (issue #3).
+
+taylor_green: decaying vortex with exact solution — spatial and temporal orders.
+cavity_re100 / cavity_re1000: steady lid-driven cavity vs Ghia, Ghia & Shin (1982).
+cylinder_2d1 / cylinder_2d2 / cylinder_3d1z: Schäfer & Turek (1996) channel benchmarks.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+
+from ...config.fluid import BoundaryCondition, FluidConfig, StabilizationConfig
+from ...fluid.forces import ReactionForce, probe
+from ...fluid.navier_stokes import NavierStokes
+from ...io.logging import get_logger
+from ...mesh import channel
+from ..registry import Metric, at_least, at_most, in_interval, rel_error_metric, register, report_only
+
+log = get_logger("verify.navier_stokes")
+
+# ---------------------------------------------------------------- reference data
+# Ghia, Ghia & Shin (1982), J. Comput. Phys. 48:387–411, Table I (u on x = 0.5) and
+# Table II (v on y = 0.5); cross-checked against several public transcriptions.
+GHIA_Y = np.array([1.0000, 0.9766, 0.9688, 0.9609, 0.9531, 0.8516, 0.7344, 0.6172, 0.5000,
+                   0.4531, 0.2813, 0.1719, 0.1016, 0.0703, 0.0625, 0.0547, 0.0000])
+GHIA_U = {100: [1.0, 0.84123, 0.78871, 0.73722, 0.68717, 0.23151, 0.00332, -0.13641, -0.20581,
+                -0.21090, -0.15662, -0.10150, -0.06434, -0.04775, -0.04192, -0.03717, 0.0],
+          1000: [1.0, 0.65928, 0.57492, 0.51117, 0.46604, 0.33304, 0.18719, 0.05702, -0.06080,
+                 -0.10648, -0.27805, -0.38289, -0.29730, -0.22220, -0.20196, -0.18109, 0.0]}
+GHIA_X = np.array([1.0000, 0.9688, 0.9609, 0.9531, 0.9453, 0.9063, 0.8594, 0.8047, 0.5000,
+                   0.2344, 0.2266, 0.1563, 0.0938, 0.0781, 0.0703, 0.0625, 0.0000])
+GHIA_V = {100: [0.0, -0.05906, -0.07391, -0.08864, -0.10313, -0.16914, -0.22445, -0.24533, 0.05454,
+                0.17527, 0.17507, 0.16077, 0.12317, 0.10890, 0.10091, 0.09233, 0.0],
+          1000: [0.0, -0.21388, -0.27669, -0.33714, -0.39188, -0.51550, -0.42665, -0.31966, 0.02526,
+                 0.32235, 0.33075, 0.37095, 0.32627, 0.30353, 0.29012, 0.27485, 0.0]}
+
+# Schäfer & Turek (1996) reference values (FEATFLOW high-resolution values for 2D-1 and 3D-1Z).
+ST_2D1 = {"c_D": 5.57953523384, "c_L": 0.010618948146, "dp": 0.11752016697}
+ST_2D2 = {"strouhal": (0.295, 0.305), "c_D_max": 3.23, "c_L_max": 1.00}
+ST_3D1Z = {"c_D": 6.185333, "c_L": 0.009401, "dp": 0.171007}
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _order(h: np.ndarray, e: np.ndarray) -> np.ndarray:
+    return np.log(e[:-1] / e[1:]) / np.log(h[:-1] / h[1:])
+
+
+# ------------------------------------------------------------------ Taylor–Green
+def _tg_exact(nu: float):
+    def u(x, t):
+        d = np.exp(-2 * np.pi ** 2 * nu * t)
+        return np.vstack([-np.cos(np.pi * x[0]) * np.sin(np.pi * x[1]) * d,
+                          np.sin(np.pi * x[0]) * np.cos(np.pi * x[1]) * d])
+    return u
+
+
+def _taylor_green_run(comm, n: int, dt: float, t_end: float, nu: float):
+    """Solve TG on [0,1]² with exact Dirichlet data; returns (solver, L2 velocity error at t_end)."""
+    tm = channel.rectangle(comm, (0.0, 0.0), (1.0, 1.0), (n, n), diagonal="crossed")
+    cfg = FluidConfig(density=1.0, viscosity=nu, rtol=1e-10, atol=1e-13)
+    exact = _tg_exact(nu)
+    ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names,
+                      velocity_functions={b: exact for b in ("left", "right", "bottom", "top")})
+    ns.set_velocity(lambda x: exact(x, 0.0))
+    nsteps = int(round(t_end / dt))
+    for _ in range(nsteps):
+        ns.step()
+    x = ufl.SpatialCoordinate(tm.mesh)
+    d = np.exp(-2 * np.pi ** 2 * nu * ns.t)
+    ue = ufl.as_vector([-ufl.cos(ufl.pi * x[0]) * ufl.sin(ufl.pi * x[1]) * d,
+                        ufl.sin(ufl.pi * x[0]) * ufl.cos(ufl.pi * x[1]) * d])
+    u, _ = ufl.split(ns.U)
+    err2 = fem.assemble_scalar(fem.form(ufl.inner(u - ue, u - ue) * ufl.dx(metadata={"quadrature_degree": 6})))
+    return ns, float(np.sqrt(comm.allreduce(err2, op=MPI.SUM)))
+
+
+def _l2_diff(ns_a: NavierStokes, ns_b: NavierStokes) -> float:
+    """‖u_a − u_b‖_L2 for two solutions on the same mesh."""
+    diff = fem.Function(ns_a.V)
+    diff.x.array[:] = ns_a.U.x.array[ns_a.V_map] - ns_b.U.x.array[ns_b.V_map]
+    e2 = fem.assemble_scalar(fem.form(ufl.inner(diff, diff) * ufl.dx(metadata={"quadrature_degree": 2})))
+    return float(np.sqrt(ns_a.comm.allreduce(e2, op=MPI.SUM)))
+
+
+@register("taylor_green", "2D Taylor–Green vortex, exact solution: observed orders in space and time", issue=3)
+def taylor_green(level, out_dir: Path, comm) -> list[Metric]:
+    nu = 0.01
+    ns_space = [8, 16, 32] if level == "quick" else [16, 32, 64]
+    dt_s, t_end_s = 0.01, 0.2
+    errs = np.array([_taylor_green_run(comm, n, dt_s, t_end_s, nu)[1] for n in ns_space])
+    hs = 1.0 / np.array(ns_space)
+    p_space = _order(hs, errs)
+    # time: same mesh, dt halved; Richardson differences cancel the (dt-independent) spatial error
+    n_t = 32 if level == "quick" else 64
+    t_end_t = 1.0
+    dts = np.array([0.2, 0.1, 0.05, 0.025])
+    runs = [_taylor_green_run(comm, n_t, dt, t_end_t, nu) for dt in dts]
+    diffs = np.array([_l2_diff(runs[i][0], runs[i + 1][0]) for i in range(len(runs) - 1)])
+    p_time = np.log(diffs[:-1] / diffs[1:]) / np.log(2.0)
+    terr = np.array([r[1] for r in runs])
+    log.info("TG space errors %s orders %s; time diffs %s orders %s", errs, p_space, diffs, p_time)
+    if comm.rank == 0:
+        plt = _plt()
+        fig, ax = plt.subplots(1, 2, figsize=(9, 3.6))
+        ax[0].loglog(hs, errs, "o-", label="‖u − u_exact‖ (dt = %g)" % dt_s)
+        ax[0].loglog(hs, errs[0] * (hs / hs[0]) ** 2, "k--", label="slope 2")
+        ax[0].set_xlabel("h"), ax[0].set_ylabel("L2 error"), ax[0].legend(), ax[0].set_title("space")
+        ax[1].loglog(dts[:-1], diffs, "o-", label="‖u_dt − u_dt/2‖ (N = %d)" % n_t)
+        ax[1].loglog(dts, terr, "s:", label="‖u_dt − u_exact‖")
+        ax[1].loglog(dts[:-1], diffs[0] * (dts[:-1] / dts[0]) ** 2, "k--", label="slope 2")
+        ax[1].set_xlabel("Δt"), ax[1].legend(), ax[1].set_title("time (Crank–Nicolson)")
+        fig.tight_layout()
+        fig.savefig(out_dir / "taylor_green_orders.png", dpi=110)
+        plt.close(fig)
+    return [at_least("order_space", float(p_space[-1]), 1.8),
+            at_least("order_time", float(p_time[-1]), 1.8),
+            report_only("l2_error_finest", float(errs[-1]), note=f"N = {ns_space[-1]}, t = {t_end_s}")]
+
+
+# ----------------------------------------------------------------------- cavity
+def cavity_solution(comm, re: float, n: int):
+    """Steady lid-driven unit cavity (lid speed 1, ν = 1/Re) by backward-Euler pseudo-time marching."""
+    tm = channel.rectangle(comm, (0.0, 0.0), (1.0, 1.0), (n, n), diagonal="crossed")
+    bcs = (BoundaryCondition(boundary="top", kind="velocity", value=(1.0, 0.0)),
+           BoundaryCondition(boundary="left", kind="no_slip"),
+           BoundaryCondition(boundary="right", kind="no_slip"),
+           BoundaryCondition(boundary="bottom", kind="no_slip"))
+    cfg = FluidConfig(density=1.0, viscosity=1.0 / re, boundaries=bcs, theta=1.0, rtol=1e-9, atol=1e-12,
+                      stabilization=StabilizationConfig(time_term=False))
+    dt = 2.0 if re <= 100 else 0.5
+    ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names)
+    steps = ns.run_to_steady(tol=1e-7, max_steps=400)
+    return ns, steps
+
+
+def _cavity_case(re: int, level, out_dir: Path, comm, tol: float) -> list[Metric]:
+    n = {100: {"quick": 64, "full": 128}, 1000: {"quick": 64, "full": 128}}[re][level]
+    t0 = time.perf_counter()
+    ns, steps = cavity_solution(comm, re, n)
+    u = ns.u
+    pu = np.c_[np.full_like(GHIA_Y, 0.5), GHIA_Y, np.zeros_like(GHIA_Y)]
+    pv = np.c_[GHIA_X, np.full_like(GHIA_X, 0.5), np.zeros_like(GHIA_X)]
+    u_c = probe(u, pu)[:, 0]
+    v_c = probe(u, pv)[:, 1]
+    dev = max(np.abs(u_c - GHIA_U[re]).max(), np.abs(v_c - GHIA_V[re]).max())
+    wall = time.perf_counter() - t0
+    s = np.linspace(0, 1, 201)
+    line_u = probe(u, np.c_[np.full(201, 0.5), np.linspace(0, 1, 201), np.zeros(201)])[:, 0]
+    line_v = probe(u, np.c_[np.linspace(0, 1, 201), np.full(201, 0.5), np.zeros(201)])[:, 1]
+    if comm.rank == 0:
+        plt = _plt()
+        fig, ax = plt.subplots(1, 2, figsize=(9, 4))
+        ax[0].plot(line_u, s, "-", label=f"P1/P1 SUPG/PSPG/LSIC {n}×{n}")
+        ax[0].plot(GHIA_U[re], GHIA_Y, "ko", mfc="none", label="Ghia et al. 1982")
+        ax[0].set_xlabel("u(0.5, y)"), ax[0].set_ylabel("y"), ax[0].legend(fontsize=8)
+        ax[1].plot(s, line_v, "-")
+        ax[1].plot(GHIA_X, GHIA_V[re], "ko", mfc="none")
+        ax[1].set_xlabel("x"), ax[1].set_ylabel("v(x, 0.5)")
+        fig.suptitle(f"lid-driven cavity Re = {re}: max |dev| = {dev:.4f}")
+        fig.tight_layout()
+        fig.savefig(out_dir / f"cavity_re{re}_centrelines.png", dpi=110)
+        plt.close(fig)
+    return [at_most("ghia_max_dev", float(dev), tol),
+            report_only("pseudo_time_steps", float(steps), note=f"{n}×{n} crossed, {wall:.1f} s")]
+
+
+@register("cavity_re100", "lid-driven cavity Re 100 vs Ghia et al. (1982) centrelines", issue=3)
+def cavity_re100(level, out_dir: Path, comm) -> list[Metric]:
+    return _cavity_case(100, level, out_dir, comm, 0.01)
+
+
+@register("cavity_re1000", "lid-driven cavity Re 1000 vs Ghia et al. (1982) centrelines", issue=3)
+def cavity_re1000(level, out_dir: Path, comm) -> list[Metric]:
+    return _cavity_case(1000, level, out_dir, comm, 0.02)
+
+
+# ------------------------------------------------------------ Schäfer–Turek 2D-1
+def channel_config(um: float, theta: float, time_term: bool, petsc: dict | None = None) -> FluidConfig:
+    bcs = (BoundaryCondition(boundary="inlet", kind="parabolic_inflow", max_speed=um),
+           BoundaryCondition(boundary="walls", kind="no_slip"),
+           BoundaryCondition(boundary="cylinder", kind="no_slip"),
+           BoundaryCondition(boundary="outlet", kind="do_nothing"))
+    kw = {"petsc": petsc} if petsc else {}
+    return FluidConfig(density=1.0, viscosity=1e-3, boundaries=bcs, theta=theta, rtol=1e-9, atol=1e-12,
+                       stabilization=StabilizationConfig(time_term=time_term), **kw)
+
+
+def cylinder_2d1_solution(comm, h_cyl: float, h_far: float):
+    """Steady Re 20 flow (U_m = 0.3): returns (c_D, c_L, Δp, number of cells)."""
+    tm = channel.channel_2d(comm, h_cyl=h_cyl, h_far=h_far)
+    ns = NavierStokes(tm.mesh, channel_config(0.3, 1.0, False), 1.0,
+                      facet_tags=tm.facet_tags, boundary_names=tm.names)
+    ns.run_to_steady(tol=1e-8, max_steps=100)
+    force = ReactionForce(ns.W, ns.F_form, ns.boundary_facets("cylinder"))()
+    u_mean, diam = 0.2, 0.1
+    c_d, c_l = 2 * force / (1.0 * u_mean ** 2 * diam)
+    p = probe(ns.p, np.array([[0.15, 0.2, 0.0], [0.25, 0.2, 0.0]]))
+    ncells = comm.allreduce(tm.mesh.topology.index_map(2).size_local, op=MPI.SUM)
+    return float(c_d), float(c_l), float(p[0] - p[1]), ncells
+
+
+@register("cylinder_2d1", "Schäfer–Turek 2D-1 (Re 20, steady): drag, lift, pressure drop", issue=3)
+def cylinder_2d1(level, out_dir: Path, comm) -> list[Metric]:
+    levels = [(0.01, 0.04), (0.005, 0.02)] if level == "quick" else [(0.01, 0.04), (0.005, 0.02), (0.0025, 0.01)]
+    rows = []
+    for h_cyl, h_far in levels:
+        t0 = time.perf_counter()
+        rows.append((h_cyl,) + cylinder_2d1_solution(comm, h_cyl, h_far) + (time.perf_counter() - t0,))
+        log.info("2D-1 h_cyl %g: c_D %.6f c_L %.6f dp %.6f cells %d (%.1f s)", *rows[-1])
+    c_d, c_l, dp, ncells = rows[-1][1:5]
+    if comm.rank == 0:
+        plt = _plt()
+        fig, ax = plt.subplots(1, 3, figsize=(11, 3.4))
+        cells = [r[4] for r in rows]
+        for a, (key, j) in zip(ax, (("c_D", 1), ("c_L", 2), ("dp", 3))):
+            a.semilogx(cells, [r[j] for r in rows], "o-", label="P1/P1 reaction force")
+            a.axhline(ST_2D1[key], color="k", ls="--", label="Schäfer–Turek")
+            a.set_xlabel("cells"), a.set_title(key)
+        ax[0].legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out_dir / "cylinder_2d1_convergence.png", dpi=110)
+        plt.close(fig)
+    return [rel_error_metric("c_D", c_d, ST_2D1["c_D"], 0.005),
+            rel_error_metric("dp", dp, ST_2D1["dp"], 0.01),
+            rel_error_metric("c_L", c_l, ST_2D1["c_L"], 0.10),
+            report_only("cells", float(ncells), note="finest mesh")]
