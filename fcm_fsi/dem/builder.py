@@ -222,3 +222,21 @@ def build_building(cfg: StructureConfig) -> Structure:
     lo, hi, kind, storey = building_boxes(cfg)
     return assemble(lo, hi, density=cfg.density, sphere_radius=cfg.sphere_radius,
                     material=cfg.material, kind=kind, storey=storey)
+
+
+def load_structure(path) -> tuple[StructureConfig, "CohesiveConfig | None"]:
+    """Read ``dem.structure`` (and ``dem.cohesive`` if present) from a case file, strictly.
+
+    Serves until the case schema carries these sections itself (docs/cohesive.md)."""
+    from pathlib import Path
+
+    from ..config.loader import build, read_yaml
+    from ..config.structure import CohesiveConfig
+    data = read_yaml(Path(path))
+    dem = data.get("dem") or {}
+    if "structure" not in dem:
+        raise ConfigError(f"{path}: key 'dem.structure' is required")
+    structure = build(StructureConfig, dem["structure"], str(path), prefix="dem.structure")
+    cohesive = (build(CohesiveConfig, dem["cohesive"], str(path), prefix="dem.cohesive")
+                if dem.get("cohesive") is not None else None)
+    return structure, cohesive

@@ -175,8 +175,8 @@ def bond_forces(pos, quat, pt_a, pt_b, pt_ra, pt_rb, pt_na, pt_area, sigma_c, de
     Point p joins block a at body-frame offset pt_ra[p] and block b at pt_rb[p] (the two
     material points coincide in the bonded reference state); pt_na[p] is the face normal
     from a towards b in a's body frame; pt_area[p] its share of the face area [m²].
-    Opening d = x_b − x_a; δn = d·n, δt = |d − δn n|. Block a receives +A T at x_a, block b
-    −A T at x_b. ``lam_max`` and ``broken`` are updated in place.
+    Opening d = x_b − x_a; δn = d·n, δt = |d − δn n|. Block a receives +A T, block b −A T,
+    both at the midpoint (x_a + x_b)/2. ``lam_max`` and ``broken`` are updated in place.
     Returns (stored energy [J], fracture dissipation so far [J]).
     """
     stored = 0.0
@@ -206,6 +206,10 @@ def bond_forces(pos, quat, pt_a, pt_b, pt_ra, pt_rb, pt_na, pt_area, sigma_c, de
         f = tn * pt_area[p] * n
         if dt > 0.0:
             f += (tt * pt_area[p] / dt) * dtv
+        # both forces act at the midpoint of the two material points: the pair's moment
+        # about any point is then zero (angular momentum is conserved)
+        arm_a += 0.5 * d
+        arm_b -= 0.5 * d
         for k in range(3):
             force[a, k] += f[k]
             force[b, k] -= f[k]

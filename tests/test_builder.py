@@ -1,0 +1,144 @@
+"""Structure builder: the paper building, surface spheres, mass, bonds on touching faces, errors."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fcm_fsi.config.loader import ConfigError, build
+from fcm_fsi.config.structure import CohesiveConfig, StructureConfig
+from fcm_fsi.dem.builder import (KINDS, assemble, build_building, load_structure,
+                                 surface_spheres)
+from fcm_fsi.dem.cohesive import CohesiveLaw
+
+PAPER = Path(__file__).resolve().parents[1] / "cases" / "building_paper.yaml"
+
+
+@pytest.fixture(scope="module")
+def paper():
+    cfg, coh = load_structure(PAPER)
+    return cfg, coh, build_building(cfg)
+
+
+def brute_force_touching(lo, hi, tol=1e-9):
+    pairs = set()
+    n = len(lo)
+    for i in range(n):
+        for j in range(n):
+            if i == j:
+                continue
+            for k in range(3):
+                o = [a for a in range(3) if a != k]
+                if abs(hi[i, k] - lo[j, k]) < tol and np.all(
+                        np.minimum(hi[i, o], hi[j, o]) - np.maximum(lo[i, o], lo[j, o]) > tol):
+                    pairs.add((i, j))
+    return pairs
+
+
+def test_paper_building_has_208_blocks(paper):
+    cfg, coh, s = paper
+    assert s.nb == 208
+    assert coh.sigma_c == 1.0e7 and coh.delta_f == 0.02 and cfg.sphere_radius == 0.1
+    counts = dict(zip(KINDS, np.bincount(s.kind, minlength=len(KINDS))))
+    assert counts["column"] == 2 * 4 * 4  # 4 columns × 4 lifts × 2 storeys
+
+
+def test_blocks_do_not_overlap_and_bonds_are_exactly_the_touching_faces(paper):
+    _, _, s = paper
+    lo, hi = s.lo, s.hi
+    inter = np.minimum(hi[:, None], hi[None]) - np.maximum(lo[:, None], lo[None])
+    overlap = np.all(inter > 1e-9, axis=2)
+    np.fill_diagonal(overlap, False)
+    assert not overlap.any()
+    got = {(f.a, f.b) for f in s.faces}
+    assert len(got) == len(s.faces)
+    assert got == brute_force_touching(lo, hi)
+    for f in s.faces:  # shared rectangle lies on both boxes' faces
+        c = np.array(f.centre)
+        assert np.all(c >= lo[f.a] - 1e-9) and np.all(c <= hi[f.a] + 1e-9)
+        assert np.all(c >= lo[f.b] - 1e-9) and np.all(c <= hi[f.b] + 1e-9)
+
+
+def test_door_is_open(paper):
+    cfg, _, s = paper
+    op = cfg.openings[0]
+    c = s.pos
+    y0 = cfg.origin[1] + cfg.column[1] / 2 + op.offset
+    inside = ((np.abs(c[:, 0] - cfg.origin[0]) < cfg.wall_thickness)
+              & (c[:, 1] > y0) & (c[:, 1] < y0 + op.width) & (c[:, 2] < op.height))
+    assert not inside.any()
+
+
+def test_spheres_sit_on_the_surface_and_mass_from_the_solid_box(paper):
+    cfg, _, s = paper
+    r = cfg.sphere_radius
+    half = 0.5 * (s.hi - s.lo)[s.sph_block]
+    gap = half - (np.abs(s.sph_local) + r)  # ≥ 0 inside; 0 on the face it touches
+    assert gap.min() > -1e-12
+    assert np.all(gap.min(axis=1) < 1e-12)
+    vol = np.prod(s.hi - s.lo, axis=1)
+    np.testing.assert_allclose(s.mass, cfg.density * vol, rtol=1e-14)
+    # a 1 × 0.4 × 0.4 column block: I_x = m(0.4² + 0.4²)/12
+    col = np.flatnonzero(s.kind == KINDS.index("column"))[0]
+    e = s.hi[col] - s.lo[col]
+    assert s.inertia[col, 0] == pytest.approx(s.mass[col] * (e[1] ** 2 + e[2] ** 2) / 12)
+
+
+def test_surface_spheres_hollow_cube():
+    pts = surface_spheres(np.array([1.0, 1.0, 1.0]), 0.1)
+    assert len(pts) == 5 ** 3 - 3 ** 3  # 5 per edge, interior 3×3×3 removed
+
+
+def test_built_structure_is_stress_free(paper):
+    cfg, coh, s = paper
+    bonds = s.bonds(CohesiveLaw.from_config(coh), coh.points_per_edge)
+    f = np.zeros((s.nb, 3))
+    t = np.zeros((s.nb, 3))
+    bonds.compute(s.pos, s.quat, f, t)
+    assert np.abs(f).max() < 1e-6 and np.abs(t).max() < 1e-6
+    assert bonds.n_bonds == len(s.faces) and bonds.n_points == 4 * len(s.faces)
+    np.testing.assert_allclose(np.bincount(bonds.pt_bond, bonds.pt_area), bonds.bond_area)
+
+
+def cfg_dict(**changes):
+    d = dict(storeys=1, storey_height=3.0, bays_x=[4.0], bays_y=[4.0], column=[0.4, 0.4],
+             wall_thickness=0.2, slab_thickness=0.2, block_size=1.0, sphere_radius=0.1,
+             density=2400.0)
+    d.update(changes)
+    return d
+
+
+@pytest.mark.parametrize("changes, words", [
+    (dict(wall_thickness=0.6), "wall_thickness"),
+    (dict(density=-1.0), "density"),
+    (dict(walls=["xmin", "front"]), "walls"),
+    (dict(colum=[0.4, 0.4]), "did you mean"),
+    (dict(openings=[dict(storey=0, side="xmin", bay=0, offset=3.0, width=1.0, height=2.0)]), "panel length"),
+    (dict(openings=[dict(storey=2, side="xmin", bay=0, offset=0.0, width=1.0, height=2.0)]), "storeys"),
+    (dict(walls=["xmin"], openings=[dict(storey=0, side="ymin", bay=0, offset=0.0, width=1.0, height=2.0)]), "no wall"),
+])
+def test_structure_config_errors(changes, words):
+    with pytest.raises(ConfigError, match=words):
+        build(StructureConfig, cfg_dict(**changes), "case.yaml", prefix="dem.structure")
+
+
+def test_blocks_thinner_than_two_radii_are_refused():
+    with pytest.raises(ConfigError, match="thinner than two sphere radii"):
+        build_building(build(StructureConfig, cfg_dict(wall_thickness=0.15)))
+
+
+@pytest.mark.parametrize("data, words", [
+    (dict(sigma_c=0.0, delta_f=0.02), "sigma_c"),
+    (dict(sigma_c=1e7, delta_f=-0.02), "delta_f"),
+    (dict(sigma_c=1e7, delta_f=0.02, mode="damaged"), "did you mean 'damage'"),
+    (dict(sigma_c=1e7, delta_f=0.02, points_per_edge=0), "points_per_edge"),
+])
+def test_cohesive_config_errors(data, words):
+    with pytest.raises(ConfigError, match=words):
+        build(CohesiveConfig, data, "case.yaml", prefix="dem.cohesive")
+
+
+def test_assemble_pair_shares_one_face():
+    s = assemble([[0, 0, 0], [1, 0, 0]], [[1, 1, 1], [2, 1.5, 1]], density=1000.0, sphere_radius=0.1)
+    assert len(s.faces) == 1
+    f = s.faces[0]
+    assert (f.a, f.b) == (0, 1) and f.normal == (1.0, 0.0, 0.0) and f.area == pytest.approx(1.0)
