@@ -68,7 +68,7 @@ class FluidConfig:
     quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
     pressure_reference: tuple[float, ...] | None = param(
         None, unit="m", doc="point where p = 0 is pinned when no boundary is do_nothing (default: mesh lower corner)")
-    petsc: dict = param(default_factory=_default_petsc,
+    petsc: dict[str, str | int | float | bool] = param(default_factory=_default_petsc,
                         doc="PETSc options of the monolithic (u, p) solve, prefix ns_; e.g. "
                             "{ksp_type: gmres, pc_type: asm, sub_pc_type: ilu} for large 3D runs")
 

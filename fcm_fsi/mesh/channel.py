@@ -86,7 +86,7 @@ def _classify_and_mesh(gmsh, dim: int, length: float, height: float, center, rad
     dist = gmsh.model.mesh.field.add("Distance")
     gmsh.model.mesh.field.setNumbers(dist, "SurfacesList" if dim == 3 else "CurvesList", groups["cylinder"])
     if dim == 2:
-        gmsh.model.mesh.field.setNumber(dist, "Sampling", 200)
+        gmsh.model.mesh.field.setNumber(dist, "NumPointsPerCurve", 200)
     thr = gmsh.model.mesh.field.add("Threshold")
     gmsh.model.mesh.field.setNumber(thr, "InField", dist)
     gmsh.model.mesh.field.setNumber(thr, "SizeMin", h_cyl)
@@ -107,8 +107,9 @@ def _build_or_load(comm, key: str, dim: int, builder) -> TaggedMesh:
     CACHE.mkdir(parents=True, exist_ok=True) if comm.rank == 0 else None
     path = CACHE / f"{key}.msh"
     if comm.rank == 0:
-        if not gmsh.isInitialized():
+        if not getattr(gmsh, "_fcm_fsi_initialized", False):   # gmsh 4.8 has no isInitialized()
             gmsh.initialize()
+            gmsh._fcm_fsi_initialized = True
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add(key)
         if path.exists():

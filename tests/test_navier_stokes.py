@@ -1,0 +1,126 @@
+"""Physics tests of the stabilized Navier–Stokes solver (issue #3). Total runtime ~1 min."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fcm_fsi.config.case import case_from_dict
+from fcm_fsi.config.fluid import BoundaryCondition, FluidConfig
+from fcm_fsi.config.loader import ConfigError
+from fcm_fsi.fluid.forces import ReactionForce
+from fcm_fsi.fluid.navier_stokes import NavierStokes, NonlinearSolveError
+from fcm_fsi.mesh.channel import rectangle
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def poiseuille(n: int, mu: float = 0.1):
+    """Steady channel flow [0,2]×[0,1], parabolic inflow U=1, do-nothing outflow."""
+    tm = rectangle(MPI.COMM_WORLD, (0.0, 0.0), (2.0, 1.0), (2 * n, n))
+    cfg = FluidConfig(density=1.0, viscosity=mu, theta=1.0, rtol=1e-10, atol=1e-12, boundaries=(
+        BoundaryCondition(boundary="left", kind="parabolic_inflow", max_speed=1.0),
+        BoundaryCondition(boundary="bottom", kind="no_slip"),
+        BoundaryCondition(boundary="top", kind="no_slip"),
+        BoundaryCondition(boundary="right", kind="do_nothing")))
+    ns = NavierStokes(tm.mesh, cfg, 1.0, facet_tags=tm.facet_tags, boundary_names=tm.names)
+    ns.run_to_steady(tol=1e-9, max_steps=60)
+    X = ns.V.tabulate_dof_coordinates()
+    u = ns.u.x.array.reshape(-1, 2)
+    exact = 4 * X[:, 1] * (1 - X[:, 1])
+    err_u = np.abs(u[:, 0] - exact).max()
+    err_v = np.abs(u[:, 1]).max()
+    # wall shear stress on the top wall by reaction: μ|du/dy| = 4μ per unit length, length 2
+    top = ReactionForce(ns.W, ns.F_form, ns.boundary_facets("top"))()
+    return err_u, err_v, top, ns
+
+
+def test_poiseuille_converges_at_second_order():
+    """Nodal error of P1/P1 SUPG/PSPG/LSIC for plane Poiseuille flow falls ~4× per halving of h."""
+    e8, v8, _, _ = poiseuille(8)
+    e16, v16, top, ns = poiseuille(16)
+    assert e16 < 0.01
+    assert np.log2(e8 / e16) > 1.8
+    assert v16 < 0.01
+    # pressure gradient −8μU/H² = −0.8 and the wall force (fluid on wall) = +x shear 4μ·L = 0.8
+    p = ns.p.x.array
+    X = ns.Q.tabulate_dof_coordinates()
+    slope = np.polyfit(X[:, 0], p, 1)[0]
+    assert slope == pytest.approx(-0.8, rel=0.03)
+    assert top[0] == pytest.approx(0.8, rel=0.03)
+
+
+def test_taylor_green_space_order():
+    """Observed L2 order of the velocity at N = 8 → 16 → 32 (the verification case's quick level)."""
+    from fcm_fsi.verify.cases.navier_stokes import _taylor_green_run
+    errs = [_taylor_green_run(MPI.COMM_WORLD, n, 0.01, 0.1, 0.01)[1] for n in (8, 16, 32)]
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert orders[-1] > 1.8, errs
+
+
+def test_bad_boundary_kind_is_a_config_error():
+    base = {"name": "x", "run": {"t_end": 1.0, "dt": 0.1}, "mesh": {"kind": "rectangle"}}
+    with pytest.raises(ConfigError, match=r"fluid.boundaries\[0\].kind.*no_slip"):
+        case_from_dict({**base, "fluid": {"boundaries": [{"boundary": "top", "kind": "noslip"}]}})
+    with pytest.raises(ConfigError, match="more than one condition"):
+        case_from_dict({**base, "fluid": {"boundaries": [{"boundary": "top", "kind": "no_slip"},
+                                                         {"boundary": "top", "kind": "slip"}]}})
+
+
+def test_unknown_boundary_name_is_a_config_error():
+    tm = rectangle(MPI.COMM_WORLD, n=(4, 4))
+    cfg = FluidConfig(boundaries=(BoundaryCondition(boundary="lid", kind="no_slip"),))
+    with pytest.raises(ConfigError, match="'lid' is not a mesh boundary"):
+        NavierStokes(tm.mesh, cfg, 0.1, facet_tags=tm.facet_tags, boundary_names=tm.names)
+
+
+def test_nonconvergence_reports_step_time_and_history():
+    """One nonlinear iteration allowed with an unreachable tolerance: a clear error, not a silent result."""
+    tm = rectangle(MPI.COMM_WORLD, n=(8, 8))
+    cfg = FluidConfig(density=1.0, viscosity=0.01, max_iterations=1, rtol=1e-15, atol=1e-300, boundaries=(
+        BoundaryCondition(boundary="top", kind="velocity", value=(1.0, 0.0)),
+        BoundaryCondition(boundary="left", kind="no_slip"), BoundaryCondition(boundary="right", kind="no_slip"),
+        BoundaryCondition(boundary="bottom", kind="no_slip")))
+    ns = NavierStokes(tm.mesh, cfg, 0.1, facet_tags=tm.facet_tags, boundary_names=tm.names)
+    with pytest.raises(NonlinearSolveError) as info:
+        ns.step()
+    assert info.value.step == 1 and info.value.time == pytest.approx(0.1)
+    assert len(info.value.residuals) == 2 and "residual history" in str(info.value)
+
+
+SCRIPT = """
+import json, sys
+from mpi4py import MPI
+from fcm_fsi.verify.cases.navier_stokes import cavity_solution
+from fcm_fsi.fluid.forces import probe
+import numpy as np
+ns, steps = cavity_solution(MPI.COMM_WORLD, 100, 16)
+vals = probe(ns.u, np.array([[0.5, 0.25, 0], [0.25, 0.5, 0], [0.8, 0.8, 0]]))
+if MPI.COMM_WORLD.rank == 0:
+    print("RESULT" + json.dumps({"steps": steps, "u": vals.tolist()}))
+"""
+
+
+def _run(np_: int) -> dict:
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               OMPI_MCA_rmaps_base_oversubscribe="1", OMP_NUM_THREADS="1")
+    cmd = [sys.executable, "-c", SCRIPT]
+    if np_ > 1:
+        cmd = ["mpirun", "-n", str(np_), "--oversubscribe"] + cmd
+    out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    line = [ln for ln in out.stdout.splitlines() if ln.startswith("RESULT")][0]
+    return json.loads(line[6:])
+
+
+def test_one_and_two_ranks_agree():
+    """Steady Re-100 cavity on 16×16: 1-rank and 2-rank solutions agree to solver tolerance."""
+    one, two = _run(1), _run(2)
+    assert np.allclose(one["u"], two["u"], atol=1e-7, rtol=0)
+    assert abs(one["steps"] - two["steps"]) <= 1
