@@ -49,6 +49,8 @@ class PhaseFieldConfig:
     mobility_factor: float = param(1.0, doc="γ = mobility_factor · U, U = max |u| of the prescribed field (or reference_velocity)", ge=0, le=100)
     reference_velocity: float | None = param(None, unit="m/s", doc="velocity scale U for γ when the velocity is not prescribed", gt=0)
     supg: bool = param(True, doc="SUPG stabilization with τ_φ of eq 15")
+    picard_tolerance: float = param(1e-6, doc="Picard iterations stop when max |φ_k+1 − φ_k| falls below this", gt=0, lt=1)
+    picard_max_iterations: int = param(10, doc="most Picard iterations per step; more is a divergence error", ge=1, le=100)
     volume_correction: bool = param(False, doc="shift the interface by L_err = V_err/A every step (eqs 16–17)")
     initial: InitialShape = param(doc="initial liquid region")
     velocity: PrescribedVelocity | None = param(None, doc="prescribed advecting velocity; omit when the fluid section provides it")

@@ -27,15 +27,16 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from dolfinx import fem
+import dolfinx.fem.petsc
 from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_vector
 
 from ..config.phase_field import InitialShape, PhaseFieldConfig
 from ..fcm.cut import cut_measures
 
-# Quadrature degree per form: with n = ∇φ*/|∇φ*| constant in each P1 cell, the conservative
-# integrands are polynomials of degree ≤ 2 (exact at degree 2); the classical reaction term
+# Quadrature degree per form: with the P1 nodal normal the conservative integrands are
+# polynomials of degree ≤ 3 (exact at degree 3); the classical reaction term
 # φ³·w needs 4. τ_φ (SUPG) is not polynomial: the degree stays fixed (FFCx would pick ~100 points).
-QUADRATURE_DEGREE = {"conservative": 2, "nonconservative": 4}
+QUADRATURE_DEGREE = {"conservative": 3, "nonconservative": 4}
 NORMAL_REGULARISATION = 1e-8  # |∇φ| floor relative to 1/ε in n = ∇φ/|∇φ|
 
 
@@ -88,17 +89,49 @@ def tau_phi(u, dt, h):
     return ((2.0 / dt) ** 2 + (2.0 * ufl.sqrt(ufl.dot(u, u)) / h) ** 2) ** -0.5
 
 
-def unit_normal(phi, eps):
-    """n = ∇φ/|∇φ|, regularised where the gradient vanishes."""
-    g = ufl.grad(phi)
-    return g / ufl.sqrt(ufl.dot(g, g) + (NORMAL_REGULARISATION / eps) ** 2)
+class NodalNormal:
+    """n = ∇φ/|∇φ| as a P1 vector field: the cell gradients averaged to the nodes
+    (lumped-mass L2 projection), then normalised.
+
+    Cell-wise normals of a P1 field point in noisy directions in the interface tails,
+    where the sharpening flux then acts as a random compressive velocity and amplifies
+    the noise; the nodal average removes that instability.
+    """
+
+    def __init__(self, phi: fem.Function, eps: float):
+        msh = phi.function_space.mesh
+        self.phi, self.eps = phi, eps
+        W = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+        self.n = fem.Function(W, name="normal")
+        self.gdim = msh.geometry.dim
+        v = ufl.TestFunction(W)
+        dx = ufl.dx(metadata={"quadrature_degree": 1})
+        self.grad_form = fem.form(ufl.inner(ufl.grad(phi), v) * dx)
+        lumped = fem.petsc.assemble_vector(fem.form(ufl.TestFunction(phi.function_space) * dx))
+        lumped.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        lumped_fn = fem.Function(phi.function_space)
+        lumped_fn.vector.array[:] = lumped.array
+        lumped_fn.x.scatter_forward()
+        self.lumped = lumped_fn.x.array.copy()
+        self.vec = fem.petsc.create_vector(self.grad_form)
+
+    def update(self) -> None:
+        with self.vec.localForm() as loc:
+            loc.set(0.0)
+        assemble_vector(self.vec, self.grad_form)
+        self.vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.n.vector.array[:] = self.vec.array
+        self.n.x.scatter_forward()
+        g = self.n.x.array.reshape(-1, self.gdim) / self.lumped[:, None]
+        norm = np.sqrt((g ** 2).sum(axis=1) + (NORMAL_REGULARISATION / self.eps) ** 2)
+        self.n.x.array[:] = (g / norm[:, None]).ravel()
 
 
-def phase_field_residual(phi, w, phi_n, phi_k, phi_star, u, dt, gamma, eps, form: str, supg: bool, dx, ds):
+def phase_field_residual(phi, w, phi_n, phi_k, normal, u, dt, gamma, eps, form: str, supg: bool, dx, ds):
     """Residual F(φ; w) of the Crank–Nicolson scheme, linear in the trial φ.
 
-    The interface normal is taken at the extrapolated φ* = 3/2 φⁿ − 1/2 φⁿ⁻¹ (second
-    order, fixed during the step); the remaining polynomial nonlinearity g(φ) = φ(1−φ)
+    The interface normal is the nodal (P1) normal of the extrapolated φ* = 3/2 φⁿ − 1/2 φⁿ⁻¹
+    (second order, fixed during the step; see :class:`NodalNormal`); the remaining polynomial nonlinearity g(φ) = φ(1−φ)
     (or the Allen–Cahn reaction f(φ) = φ(1−φ)(1−2φ)) is linearised by Newton at the
     iterate φ_k, g ≈ g(φ_k) + g'(φ_k)(φ − φ_k), and averaged with its value at φⁿ
     (Crank–Nicolson). Iterating to convergence gives the exact CN solution.
@@ -114,7 +147,7 @@ def phase_field_residual(phi, w, phi_n, phi_k, phi_star, u, dt, gamma, eps, form
         + gamma * eps * ufl.dot(ufl.grad(w), ufl.grad(theta)) * dx
     if form == "conservative":
         g_new = phi_k * (1 - phi_k) + (1 - 2 * phi_k) * (phi - phi_k)
-        flux = 0.5 * (g_new + phi_n * (1 - phi_n)) * unit_normal(phi_star, eps)
+        flux = 0.5 * (g_new + phi_n * (1 - phi_n)) * normal
         F -= gamma * ufl.dot(ufl.grad(w), flux) * dx
         source = gamma * ufl.div(flux)          # ∇·(ε∇φ) = 0 inside P1 cells
     else:
@@ -152,11 +185,15 @@ def liquid_volume_and_area(geom: CellGeometry, phi_values: np.ndarray, comm: MPI
     return comm.allreduce(float(vol.sum()), op=MPI.SUM), comm.allreduce(float(area.sum()), op=MPI.SUM)
 
 
+def distance_from_profile(phi_values: np.ndarray, eps: float) -> np.ndarray:
+    """Invert the equilibrium profile: d = ε ln(φ/(1−φ)) (clipped away from 0 and 1) [m]."""
+    p = np.clip(phi_values, 1e-12, 1 - 1e-12)
+    return eps * np.log(p / (1 - p))
+
+
 def shift_interface(phi_values: np.ndarray, shift: float, eps: float) -> np.ndarray:
     """Move the φ = 1/2 surface by ``shift`` [m] along its normal, outward > 0 (eq 17)."""
-    p = np.clip(phi_values, 1e-15, 1 - 1e-15)
-    d = eps * np.log(p / (1 - p))
-    shifted = logistic(d + shift, eps)
+    shifted = logistic(distance_from_profile(phi_values, eps) + shift, eps)
     # keep values that were outside (0, 1) (over/undershoots) unchanged in sign of error
     return np.where((phi_values > 0) & (phi_values < 1), shifted, phi_values)
 
@@ -176,13 +213,14 @@ class PhaseField:
         self.phi_star = fem.Function(self.V)
         self.u = velocity
         self.eps = interface_width(h_min, cfg.width_factor)
+        self.normal = NodalNormal(self.phi_star, self.eps)
         self.gamma_value = cfg.mobility_factor * velocity_scale
         self.dt = fem.Constant(msh, PETSc.ScalarType(dt))
         gamma = fem.Constant(msh, PETSc.ScalarType(self.gamma_value))
         dx = ufl.dx(metadata={"quadrature_degree": QUADRATURE_DEGREE[cfg.form]})
         ds = ufl.ds(metadata={"quadrature_degree": 2})
         trial, w = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        F = phase_field_residual(trial, w, self.phi_n, self.phi_k, self.phi_star, self.u, self.dt, gamma,
+        F = phase_field_residual(trial, w, self.phi_n, self.phi_k, self.normal.n, self.u, self.dt, gamma,
                                  self.eps, cfg.form, cfg.supg, dx, ds)
         self.a = fem.form(ufl.lhs(F))
         self.L = fem.form(ufl.rhs(F))
@@ -231,6 +269,7 @@ class PhaseField:
         first = self.steps_done == 0
         self.phi_star.x.array[:] = self.phi_n.x.array if first else \
             1.5 * self.phi_n.x.array - 0.5 * self.phi_nm1.x.array
+        self.normal.update()
         self.phi_k.x.array[:] = self.phi_star.x.array
         for it in range(1, self.cfg.picard_max_iterations + 1):
             self.solve_linearised()

@@ -1,0 +1,89 @@
+"""Command line: ``mpirun -n 2 python -m fcm_fsi case.yaml [options]``.
+
+Exit codes: 0 success, 2 bad input (case file, override, checkpoint), 3 the run diverged
+or a solver failed (the last good checkpoint is kept).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+EXIT_DIVERGED = 3
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog="python -m fcm_fsi", description="Run an fcm_fsi case file.")
+    ap.add_argument("case", type=Path, help="case file (YAML); see docs/case-reference.md")
+    ap.add_argument("--output", type=Path, default=None, help="output folder (default: output.directory of the case)")
+    ap.add_argument("--restart", default=None, metavar="CHECKPOINT", help="continue from this checkpoint.h5")
+    ap.add_argument("--validate", action="store_true", help="check the case file and exit")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="override a case value, e.g. --set run.dt=1e-3 (repeatable)")
+    ap.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return ap.parse_args(argv)
+
+
+def write_resolved_case(case, out: Path, rank: int) -> None:
+    """The case as understood (defaults filled in), next to the results."""
+    if rank == 0:
+        import yaml
+        from .config import to_dict
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "case.resolved.yaml").write_text(yaml.safe_dump(to_dict(case), sort_keys=False))
+
+
+def run_case(case, out: Path, comm, restart: str | None, case_dir: Path) -> None:
+    """Dispatch on the physics present in the case."""
+    physics = case.physics
+    if physics == "phase_field":
+        from .simulation.loop import TimeLoop
+        from .simulation.phase_field import PhaseFieldModel
+        TimeLoop(case, PhaseFieldModel(case, comm, case_dir), out, comm, restart).run()
+    elif physics == "dem":
+        from .dem.driver import run_dem_case
+        run_dem_case(case, out, comm, restart)
+    else:
+        from .config import ConfigError
+        raise ConfigError(f"{case.name}: cases with a '{physics}' driver are not available in this "
+                          "version (see README: status)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    from mpi4py import MPI
+
+    from .config import ConfigError, load_case
+    from .io.logging import setup_logging
+    comm = MPI.COMM_WORLD
+    log = setup_logging(args.log_level, comm.rank)
+    try:
+        case = load_case(args.case, args.set)
+    except ConfigError as err:
+        if comm.rank == 0:
+            print(f"error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.validate:
+        if comm.rank == 0:
+            print(f"{args.case}: valid ({case.physics} case '{case.name}')")
+        return 0
+    out = args.output or Path(case.output.directory)
+    write_resolved_case(case, out, comm.rank)
+    comm.barrier()
+    log.info("case %s (%s) on %d rank(s) -> %s", case.name, case.physics, comm.size, out)
+    from .simulation.loop import SimulationDiverged
+    try:
+        run_case(case, out, comm, args.restart, args.case.resolve().parent)
+    except ConfigError as err:
+        if comm.rank == 0:
+            print(f"error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (SimulationDiverged, FloatingPointError) as err:
+        log.error("run stopped: %s", err)
+        return EXIT_DIVERGED
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,60 @@
+"""Generate docs/case-reference.md from the schema, so the docs cannot drift from the code.
+
+    python -m fcm_fsi.config.docs > docs/case-reference.md
+"""
+from __future__ import annotations
+
+import dataclasses
+import sys
+from typing import get_type_hints
+
+from .case import Case
+from .fields import range_text
+from .loader import _is_optional, type_name
+
+
+def _section_types(tp) -> list[type]:
+    """Dataclass types reachable from a field type (optional, tuples of dataclasses)."""
+    _, inner = _is_optional(tp)
+    if dataclasses.is_dataclass(inner):
+        return [inner]
+    args = getattr(inner, "__args__", ()) or ()
+    return [a for a in args if dataclasses.is_dataclass(a)]
+
+
+def _default_text(f: dataclasses.Field) -> str:
+    if f.default is not dataclasses.MISSING:
+        return "`null`" if f.default is None else f"`{f.default!r}`"
+    if f.default_factory is not dataclasses.MISSING:
+        value = f.default_factory()
+        return "—" if dataclasses.is_dataclass(value) else f"`{value!r}`"
+    return "**required**"
+
+
+def reference_markdown() -> str:
+    lines = ["# Case-file reference", "",
+             "Generated from the schema by `python -m fcm_fsi.config.docs > docs/case-reference.md`;",
+             "a test fails when this file is stale. Units are SI. Unknown keys are errors.", ""]
+    seen: set[type] = set()
+    queue: list[tuple[str, type]] = [("(top level)", Case)]
+    while queue:
+        path, cls = queue.pop(0)
+        if cls in seen:
+            continue
+        seen.add(cls)
+        hints = get_type_hints(cls)
+        lines += [f"## `{path}` — {cls.__name__}", "", (cls.__doc__ or "").strip().split("\n\n")[0], "",
+                  "| key | type | unit | default | allowed | meaning |", "|---|---|---|---|---|---|"]
+        for f in dataclasses.fields(cls):
+            meta = f.metadata
+            doc = meta.get("doc", "").replace("|", "\\|")
+            lines.append(f"| `{f.name}` | {type_name(hints[f.name])} | {meta.get('unit', '-')} | "
+                         f"{_default_text(f)} | {range_text(meta)} | {doc} |")
+            for sub in _section_types(hints[f.name]):
+                queue.append((f.name if path == "(top level)" else f"{path}.{f.name}", sub))
+        lines.append("")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.stdout.write(reference_markdown())

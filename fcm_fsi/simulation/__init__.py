@@ -1,0 +1,1 @@
+"""Simulation drivers: the shared time loop and one model per kind of physics."""

@@ -1,0 +1,137 @@
+"""The time loop shared by every mesh-based model: step, report, write, checkpoint.
+
+A model provides ``mesh``, ``output_functions``, ``series_units``, ``advance(t, dt)``,
+``diagnostics()``, ``stable_dt()``, ``health()``, ``state()`` and ``load_state()``.
+The loop owns dt control, logging (rank 0), the CSV series, XDMF output, checkpoints,
+the stop on divergence (the last good checkpoint stays untouched) and the timing table.
+"""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+from mpi4py import MPI
+
+from ..config.case import Case
+from ..io.checkpoint import case_fingerprint, read_checkpoint, write_checkpoint
+from ..io.csv import TimeSeriesCSV
+from ..io.fields import FieldWriter
+from ..io.logging import get_logger
+from ..io.timing import StageTimer
+
+log = get_logger("run")
+
+
+class SimulationDiverged(RuntimeError):
+    """A step produced non-finite or out-of-bounds values; the message says where."""
+
+
+class Model(Protocol):
+    mesh: object
+    output_functions: list
+    series_units: dict[str, str]
+
+    def advance(self, t: float, dt: float, timer: StageTimer) -> None: ...
+    def diagnostics(self) -> dict[str, float]: ...
+    def health(self, diag: dict[str, float]) -> str | None: ...
+    def stable_dt(self, cfl: float) -> float: ...
+    def state(self) -> dict[str, np.ndarray]: ...
+    def load_state(self, state: dict[str, np.ndarray]) -> None: ...
+
+
+def next_dt(case: Case, model: Model, t: float) -> float:
+    """Δt for the next step: fixed, or CFL-limited up to dt_max; never past t_end."""
+    run = case.run
+    dt = run.dt
+    if run.cfl is not None:
+        dt = min(run.dt_max or run.dt, model.stable_dt(run.cfl))
+    remaining = run.t_end - t
+    if remaining < 1.5 * dt:  # land exactly on t_end without a sliver step
+        dt = remaining if remaining <= dt else 0.5 * remaining
+    return dt
+
+
+def progress_line(step: int, t: float, dt: float, t_end: float, wall: float, t_start: float,
+                  diag: dict[str, float]) -> str:
+    """One progress line; the ETA extrapolates the wall time per simulated second of this run."""
+    eta = wall / (t - t_start) * (t_end - t) if t > t_start else float("nan")
+    health = " ".join(f"{k}={v:.4g}" for k, v in diag.items())
+    return f"step {step:6d} t={t:.5g} dt={dt:.3g} wall={wall:.1f}s eta={eta:.0f}s {health}"
+
+
+class TimeLoop:
+    """Runs ``model`` for ``case`` writing into ``out_dir``."""
+
+    def __init__(self, case: Case, model: Model, out_dir: Path, comm: MPI.Comm, restart: str | None):
+        self.case, self.model, self.out, self.comm = case, model, Path(out_dir), comm
+        self.fingerprint = case_fingerprint(case)
+        self.timer = StageTimer()
+        self.step, self.t = 0, 0.0
+        if restart:
+            ck = read_checkpoint(Path(restart), comm, self.fingerprint)
+            model.load_state(ck.arrays)
+            self.step, self.t = ck.step, ck.time
+            log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)
+        self.series = TimeSeriesCSV(self.out / "series.csv", {"step": "-", "t": "s", "dt": "s", **model.series_units},
+                                    comm.rank, append=bool(restart))
+        self.fields = None
+        if case.output.xdmf:
+            name = "fields.xdmf" if not restart else f"fields_from_step{self.step}.xdmf"
+            self.fields = FieldWriter(self.out / name, model.mesh, model.output_functions)
+
+    def checkpoint(self, dt: float) -> None:
+        if self.case.output.checkpoint:
+            with self.timer("checkpoint"):
+                write_checkpoint(self.out / "checkpoint.h5", self.comm, self.fingerprint, self.step, self.t,
+                                 dt, self.model.state())
+
+    def record(self, dt: float, diag: dict[str, float]) -> None:
+        with self.timer("output"):
+            self.series.write(step=self.step, t=self.t, dt=dt, **diag)
+
+    def run(self) -> dict[str, float]:
+        run, wall0 = self.case.run, time.perf_counter()
+        t0 = self.t
+        diag = self.model.diagnostics()
+        if self.step == 0:
+            self.record(0.0, diag)
+            if self.fields:
+                self.fields.write(self.t)
+        dt = run.dt
+        while self.t < run.t_end * (1 - 1e-12):
+            dt = next_dt(self.case, self.model, self.t)
+            self.model.advance(self.t, dt, self.timer)
+            self.step += 1
+            self.t += dt
+            with self.timer("diagnostics"):
+                diag = self.model.diagnostics()
+            problem = self.model.health(diag)
+            if problem:
+                raise SimulationDiverged(f"step {self.step}, t = {self.t:.6g} s: {problem}; "
+                                         f"last good checkpoint: {self.out / 'checkpoint.h5'}")
+            self.record(dt, diag)
+            done = self.t >= run.t_end * (1 - 1e-12)
+            if self.fields and (done or (run.output_every and self.step % run.output_every == 0)):
+                with self.timer("output"):
+                    self.fields.write(self.t)
+            if done or self.step % run.checkpoint_every == 0:
+                self.checkpoint(dt)
+            if done or self.step % run.log_every == 0:
+                wall = time.perf_counter() - wall0
+                log.info(progress_line(self.step, self.t, dt, run.t_end, wall, t0, diag))
+        if self.fields:
+            self.fields.close()
+        self.series.close()
+        log.info("finished %s: %d steps to t = %.6g s\n%s", self.case.name, self.step, self.t, self.timer.table())
+        return diag
+
+
+def finite_or_message(diag: dict[str, float]) -> str | None:
+    """The first non-finite diagnostic, as a message (None when all are finite)."""
+    for k, v in diag.items():
+        if not math.isfinite(v):
+            return f"{k} is {v}"
+    return None

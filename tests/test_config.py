@@ -1,0 +1,111 @@
+"""Strict case loading: every kind of bad input gives one clear line, never a traceback."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fcm_fsi.config import ConfigError, case_from_dict, load_case
+from fcm_fsi.config.docs import reference_markdown
+
+from .conftest import ROOT, run_cli
+
+GOOD = {"name": "t", "run": {"t_end": 1.0, "dt": 0.1},
+        "mesh": {"kind": "rectangle", "lower": [0, 0], "upper": [1, 1], "cells": [4, 4]},
+        "phase_field": {"initial": {"shape": "circle", "center": [0.5, 0.5], "radius": 0.2},
+                        "velocity": {"kind": "rotation", "center": [0.5, 0.5]}}}
+
+
+def with_change(path: str, value) -> dict:
+    import copy
+    data = copy.deepcopy(GOOD)
+    node = data
+    keys = path.split(".")
+    for k in keys[:-1]:
+        node = node[k]
+    node[keys[-1]] = value
+    return data
+
+
+def test_good_case_loads_with_defaults():
+    case = case_from_dict(GOOD)
+    assert case.physics == "phase_field"
+    assert case.phase_field.form == "conservative"
+    assert case.run.log_every == 10
+
+
+@pytest.mark.parametrize("path, value, expected", [
+    ("run.dt", -0.1, "key 'run.dt': = -0.1 is out of range: allowed > 0 (s)"),
+    ("run.dt", "fast", "key 'run.dt': = 'fast' must be a number"),
+    ("mesh.kind", "rectangel", "did you mean 'rectangle'?"),
+    ("mesh.cells", [4, 0], "key 'mesh.cells[1]': = 0 is out of range: allowed >= 1"),
+    ("phase_field.width_factor", 0, "key 'phase_field.width_factor': = 0.0 is out of range: allowed (0, 10]"),
+    ("phase_field.supg", "yes", "key 'phase_field.supg': = 'yes' must be true or false"),
+])
+def test_bad_values_name_key_value_and_range(path, value, expected):
+    with pytest.raises(ConfigError) as err:
+        case_from_dict(with_change(path, value))
+    assert expected in str(err.value)
+
+
+def test_unknown_key_suggests_closest():
+    data = with_change("run.dtt", 0.1)
+    with pytest.raises(ConfigError, match=r"key 'run.dtt': is not a known key; did you mean 'run.dt'\?"):
+        case_from_dict(data)
+
+
+def test_cross_field_checks():
+    with pytest.raises(ConfigError, match="must not exceed run.t_end"):
+        case_from_dict(with_change("run.dt", 2.0))
+    with pytest.raises(ConfigError, match="must exceed mesh.lower"):
+        case_from_dict(with_change("mesh.upper", [1, -1]))
+
+
+def test_missing_file_is_one_line(tmp_path):
+    with pytest.raises(ConfigError, match="case file not found"):
+        load_case(tmp_path / "nope.yaml")
+
+
+def test_override_applies_and_is_checked(tmp_path):
+    import yaml
+    f = tmp_path / "c.yaml"
+    f.write_text(yaml.safe_dump(GOOD))
+    assert load_case(f, ["run.dt=0.05"]).run.dt == 0.05
+    with pytest.raises(ConfigError, match="run.dt"):
+        load_case(f, ["run.dt=-1"])
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (("run.dtt", 0.1), "did you mean 'run.dt'"),
+    (("run.dt", "abc"), "must be a number"),
+    (("run.dt", -1.0), "out of range"),
+])
+def test_cli_bad_input_exits_2_without_traceback(tmp_path, edit, expected):
+    import yaml
+    f = tmp_path / "bad.yaml"
+    f.write_text(yaml.safe_dump(with_change(*edit)))
+    res = run_cli([str(f), "--validate"])
+    assert res.returncode == 2
+    assert expected in res.stderr
+    assert "Traceback" not in res.stderr + res.stdout
+    assert len(res.stderr.strip().splitlines()) == 1
+
+
+def test_cli_missing_file_and_bad_yaml(tmp_path):
+    res = run_cli([str(tmp_path / "missing.yaml")])
+    assert res.returncode == 2 and "case file not found" in res.stderr and "Traceback" not in res.stderr
+    bad = tmp_path / "broken.yaml"
+    bad.write_text("run: {t_end: 1\n")
+    res = run_cli([str(bad)])
+    assert res.returncode == 2 and "not valid YAML" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_shipped_cases_validate():
+    for case in sorted((ROOT / "cases").glob("*.yaml")):
+        load_case(case)
+
+
+def test_case_reference_is_current():
+    current = (ROOT / "docs" / "case-reference.md").read_text()
+    assert current == reference_markdown(), \
+        "docs/case-reference.md is stale: run python -m fcm_fsi.config.docs > docs/case-reference.md"
