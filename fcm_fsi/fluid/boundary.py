@@ -22,6 +22,13 @@ def _ramp(t: float, ramp: float) -> float:
     return 1.0 if ramp <= 0 or t >= ramp else 0.5 * (1 - np.cos(np.pi * t / ramp))
 
 
+def _allreduce(comm, arr: np.ndarray, op) -> np.ndarray:
+    """Element-wise Allreduce of a float array (the pickle-based allreduce is not element-wise)."""
+    out = np.empty_like(np.asarray(arr, dtype=float))
+    comm.Allreduce(np.ascontiguousarray(arr, dtype=float), out, op=op)
+    return out
+
+
 def _facet_box(ns, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Global bounding box of the vertices of the given (local) facets."""
     mesh = ns.mesh
@@ -33,7 +40,7 @@ def _facet_box(ns, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = xs.min(axis=0), xs.max(axis=0)
     else:
         lo, hi = np.full(gdim, np.inf), np.full(gdim, -np.inf)
-    return ns.comm.allreduce(lo, op=MPI.MIN), ns.comm.allreduce(hi, op=MPI.MAX)
+    return _allreduce(ns.comm, lo, MPI.MIN), _allreduce(ns.comm, hi, MPI.MAX)
 
 
 def _flat_axis(ns, name: str, facets: np.ndarray) -> tuple[int, float, np.ndarray, np.ndarray]:
@@ -161,7 +168,7 @@ def build_bcs(ns, configs, custom: dict | None = None) -> BCSet:
         ref = ns.config.pressure_reference
         if ref is None:
             x = mesh.geometry.x[:, : mesh.geometry.dim]
-            ref = ns.comm.allreduce(x.min(axis=0), op=MPI.MIN)
+            ref = _allreduce(ns.comm, x.min(axis=0), MPI.MIN)
         _pin_pressure(ns, ref, bcset)
     return bcset
 

@@ -384,21 +384,33 @@ class NavierStokes:
                                   f"no convergence in {cfg.max_iterations} {cfg.nonlinear} iterations "
                                   f"(rtol {cfg.rtol:g}, atol {cfg.atol:g})")
 
-    def run_to_steady(self, tol: float, max_steps: int) -> int:
-        """March until max|u^{n+1} − uⁿ|/(Δt·max|u|) ≤ tol (1/s, collective); returns the steps taken.
+    def run_to_steady(self, tol: float, max_steps: int, growth: float = 1.0, dt_max: float = np.inf) -> int:
+        """Pseudo-time march until max|u^{n+1} − uⁿ|/(Δt·max|u|) ≤ tol (1/s); returns steps taken.
 
-        With θ = 1 and a large Δt this is pseudo-time continuation to a steady state.
+        Use θ = 1 and τ without the Δt term (``stabilization.time_term: false``) so the steady
+        state does not depend on Δt. Δt grows by ``growth`` per step up to ``dt_max``
+        (switched evolution relaxation); a failed step is retried once with Δt/4. Collective.
         """
+        rate = np.inf
         for k in range(1, max_steps + 1):
-            self.step()
+            try:
+                self.step()
+            except NonlinearSolveError:
+                self.U.x.array[:] = self.U_n.x.array
+                self.t -= float(self.dt.value)
+                self.step_count -= 1
+                self.dt.value = float(self.dt.value) / 4
+                log.info("steady march: step %d failed, retrying with dt = %g", k, float(self.dt.value))
+                self.step()
             du = self.U.x.array[self.V_map] - self.U_n.x.array[self.V_map]
             local = (np.abs(du).max(initial=0.0), np.abs(self.U.x.array[self.V_map]).max(initial=0.0))
             dmax = self.comm.allreduce(local[0], op=MPI.MAX)
             umax = self.comm.allreduce(local[1], op=MPI.MAX)
             rate = dmax / (float(self.dt.value) * max(umax, 1e-300))
-            log.debug("steady march step %d: relative change rate %.3e", k, rate)
+            log.debug("steady march step %d (dt %g): relative change rate %.3e", k, float(self.dt.value), rate)
             if rate <= tol:
                 return k
+            self.dt.value = min(float(self.dt.value) * growth, dt_max)
         raise NonlinearSolveError(self.step_count, self.t, [rate],
                                   f"no steady state within {max_steps} steps (change rate {rate:.3e} > {tol:g})")
 
