@@ -10,7 +10,7 @@ Layout of the package (data flow top to bottom):
 - ``control.py``     prescribed displacement / velocity / force per block and DOF
 - ``ledger.py``      energy ledger
 - ``system.py``      :class:`DEMSystem`: one step = a short list of named stages
-- ``builder.py``     :class:`DEMSystem` from a ``DEMConfig``
+- ``model.py``       :class:`DEMSystem` from a ``DEMConfig`` (time-step check)
 - ``output.py``      VTK PolyData (.vtp + .pvd) and HDF5 checkpoints
 - ``driver.py``      ``run_dem_case`` for pure-DEM cases
 

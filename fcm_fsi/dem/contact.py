@@ -1,0 +1,557 @@
+"""Contact, paper eqs 18–20: linear spring + dashpot (normal and tangential) + Coulomb slider.
+
+For a contact with overlap δ > 0, unit normal n (from sphere i towards the other body),
+relative velocity of the contact point v = v_i − v_other, v_n = v·n (> 0 approaching),
+v_t = v − v_n n, and tangential spring history u_t (rotated onto the current tangent
+plane every step, magnitude kept, then u_t += v_t Δt)::
+
+    F_N   = k δ + c v_n                (eq 18; clipped to F_N ≥ 0 when clip_normal)
+    f_t   = −k_t u_t − c_t v_t          (eq 19)
+    |f_t| > μ F_N  →  f_t = μ F_N f_t/|f_t|,  u_t = −f_t / k_t   (slider; no dashpot)
+    force on i = −F_N n + f_t,  on the other body the opposite, applied at the contact
+    point x_c (midway through the overlap); torques about each block's centre of mass.
+
+Dashpots from the restitution coefficient e (eq 20, tutorial §5):
+c = 2 h √(m* k), h = −ln e / √(ln² e + π²), with m* = m_i m_j/(m_i + m_j) of the two
+*blocks* (the block mass when the other body is a wall or a fixed block).
+
+Normal force at the end of contact — clipping: with ``clip_normal`` (the default) the
+normal force never turns attractive, F_N = max(kδ + c v_n, 0). Then the contact ends
+when F_N reaches 0 (before δ = 0) and the sphere leaves with a *higher* restitution than
+eq 20's e (e = 0.5 → 0.55; see ``restitution_clipped``). Without clipping eq 20 is
+exact for the linear model. Mixing of two materials: k = 2 k_1 k_2/(k_1 + k_2),
+k_t likewise, h = (h_1 + h_2)/2, μ = min(μ_1, μ_2).
+
+Ledger: stored energy ½kδ² + ½k_t|u_t|²; dashpot loss (F_N − kδ) v_n Δt + c_t|v_t|² Δt
+and slider loss μ F_N |Δu_t| per step, both with the step's velocities (n − 1/2).
+"""
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from . import L_DASHPOT, L_FRICTION, L_SPRING
+from .neighbours import NeighbourList, carry_history
+
+
+def damping_ratio(e: float) -> float:
+    """h of eq 20 for restitution e in (0, 1]."""
+    if e >= 1.0:
+        return 0.0
+    le = math.log(e)
+    return -le / math.sqrt(le * le + math.pi ** 2)
+
+
+def restitution_unclipped(h: float) -> float:
+    """e = exp(−hπ/√(1−h²)) of the linear spring–dashpot with attraction allowed."""
+    return math.exp(-h * math.pi / math.sqrt(1 - h * h))
+
+
+def restitution_clipped(h: float) -> float:
+    """Closed-form restitution of the linear spring–dashpot whose force is clipped at 0.
+
+    In units ω₀ = √(k/m*) = 1: δ'' + 2hδ' + δ = 0, δ(0) = 0, δ'(0) = 1 gives
+    δ = e^{−ht} sin(ω_d t)/ω_d with ω_d = √(1−h²). The force kδ + cδ' ∝
+    (1 − 2h²) sin ω_d t + 2hω_d cos ω_d t first vanishes at
+    ω_d t* = π − atan2(2hω_d, 1 − 2h²), before δ returns to 0; the body separates there
+    and e = −δ'(t*). (e = 0.2 → 0.3249, 0.5 → 0.5503, 0.9 → 0.9020.)
+    """
+    if h == 0.0:
+        return 1.0
+    wd = math.sqrt(1 - h * h)            # in units of ω₀
+    # F ∝ δ + 2h δ'  (units ω₀ = 1): e^{-ht}[ (1 − 2h²) sin(wd t) + 2h wd cos(wd t) ] / wd = 0
+    t_star = (math.pi - math.atan2(2 * h * wd, 1 - 2 * h * h)) / wd
+    dv = math.exp(-h * t_star) * (math.cos(wd * t_star) - h / wd * math.sin(wd * t_star))
+    return -dv
+
+
+HIST = 7   # per-contact history: tangential spring u_t (3), last normal dashpot force, last tangential dashpot force (3)
+
+
+@nb.njit(cache=True, inline="always")
+def _law(delta, nx, ny, nz, ux, uy, uz, hist, k, kt, c, ct, mu, clip, dt):
+    """Eqs 18–19 for one contact. (ux, uy, uz) is the relative velocity of the leapfrog half
+    step n−1/2, i.e. the relative displacement of the step n−1 → n over Δt; the dashpots use
+    it too (the tutorial's c(u_n − u_{n−1})/Δt, whose stability limit is Δt_cr). Returns (fx, fy, fz, e_spring, d_dash,
+    d_fric) with f the force on side i; ``hist`` (HIST,) is updated in place.
+
+    Dashpot loss uses the trapezoid of the dashpot force over the step, Δt v_{n−1/2}·(F_{n−1} +
+    F_n)/2, which is the work that matches the leapfrog kinetic energy ½ m v_{n−1/2}·v_{n+1/2}."""
+    un = ux * nx + uy * ny + uz * nz
+    sx = ux - un * nx
+    sy = uy - un * ny
+    sz = uz - un * nz
+    vn, tx, ty, tz = un, sx, sy, sz
+    FN = k * delta + c * vn
+    if clip and FN < 0.0:
+        FN = 0.0
+    fdn = FN - k * delta
+    d_dash = 0.5 * (fdn + hist[3]) * un * dt
+    hist[3] = fdn
+    # rotate the history onto the current tangent plane, keeping its magnitude
+    hx, hy, hz = hist[0], hist[1], hist[2]
+    h2 = hx * hx + hy * hy + hz * hz
+    if h2 > 0.0:
+        hn = hx * nx + hy * ny + hz * nz
+        hx -= hn * nx
+        hy -= hn * ny
+        hz -= hn * nz
+        p2 = hx * hx + hy * hy + hz * hz
+        if p2 > 0.0:
+            s = math.sqrt(h2 / p2)
+            hx *= s
+            hy *= s
+            hz *= s
+    hx += sx * dt
+    hy += sy * dt
+    hz += sz * dt
+    fx = -kt * hx - ct * tx
+    fy = -kt * hy - ct * ty
+    fz = -kt * hz - ct * tz
+    ft = math.sqrt(fx * fx + fy * fy + fz * fz)
+    fmax = mu * FN
+    d_fric = 0.0
+    gx = gy = gz = 0.0          # tangential dashpot force applied this step
+    if ft > fmax:
+        if ft > 0.0:
+            s = fmax / ft
+            fx *= s
+            fy *= s
+            fz *= s
+        nhx = -fx / kt
+        nhy = -fy / kt
+        nhz = -fz / kt
+        d_fric = fmax * math.sqrt((hx - nhx) ** 2 + (hy - nhy) ** 2 + (hz - nhz) ** 2)
+        hx, hy, hz = nhx, nhy, nhz
+    else:
+        gx = -ct * tx
+        gy = -ct * ty
+        gz = -ct * tz
+    d_dash -= 0.5 * ((gx + hist[4]) * sx + (gy + hist[5]) * sy + (gz + hist[6]) * sz) * dt
+    hist[0] = hx
+    hist[1] = hy
+    hist[2] = hz
+    hist[4] = gx
+    hist[5] = gy
+    hist[6] = gz
+    e_spring = 0.5 * k * delta * delta + 0.5 * kt * (hx * hx + hy * hy + hz * hz)
+    return -FN * nx + fx, -FN * ny + fy, -FN * nz + fz, e_spring, d_dash, d_fric
+
+
+@nb.njit(cache=True, inline="always")
+def _pointvel(vel, omega, b, rx, ry, rz):
+    """Velocity of the material point at offset r from the centre of mass of block b."""
+    return (vel[b, 0] + omega[b, 1] * rz - omega[b, 2] * ry,
+            vel[b, 1] + omega[b, 2] * rx - omega[b, 0] * rz,
+            vel[b, 2] + omega[b, 0] * ry - omega[b, 1] * rx)
+
+
+@nb.njit(cache=True, inline="always")
+def _release(nx, ny, nz, vx, vy, vz, hist, dt):
+    """Contact lost this step: the last half of the trapezoid of the dashpot work, then reset."""
+    d = 0.0
+    if hist[3] != 0.0 or hist[4] != 0.0 or hist[5] != 0.0 or hist[6] != 0.0:
+        vn = vx * nx + vy * ny + vz * nz
+        d = 0.5 * hist[3] * vn * dt - 0.5 * (hist[4] * (vx - vn * nx) + hist[5] * (vy - vn * ny)
+                                             + hist[6] * (vz - vn * nz)) * dt
+    for q in range(hist.shape[0]):
+        hist[q] = 0.0
+    return d
+
+
+@nb.njit(cache=True, inline="always")
+def _mix(mat_k, mat_kt, mat_h, mat_mu, a, b):
+    k = 2.0 * mat_k[a] * mat_k[b] / (mat_k[a] + mat_k[b])
+    kt = 2.0 * mat_kt[a] * mat_kt[b] / (mat_kt[a] + mat_kt[b])
+    return k, kt, 0.5 * (mat_h[a] + mat_h[b]), min(mat_mu[a], mat_mu[b])
+
+
+@nb.njit(cache=True, parallel=True)
+def pair_forces(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, vel, omega,
+                mass, fixed, mat_k, mat_kt, mat_h, mat_mu, clip, dt, pair_f, pair_x):
+    """Sphere–sphere contact over the Verlet pairs. Writes the force on sphere pairs[p,0]
+    into pair_f[p] and the contact point into pair_x[p]; resets the history of pairs out
+    of contact. Returns (stored spring energy, dashpot loss, slider loss, n_contacts)."""
+    e_s = 0.0
+    d_d = 0.0
+    d_f = 0.0
+    ncon = 0
+    for p in nb.prange(pairs.shape[0]):
+        i = pairs[p, 0]
+        j = pairs[p, 1]
+        dx = sph_pos[j, 0] - sph_pos[i, 0]
+        dy = sph_pos[j, 1] - sph_pos[i, 1]
+        dz = sph_pos[j, 2] - sph_pos[i, 2]
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        delta = sph_radius[i] + sph_radius[j] - dist
+        if dist == 0.0:
+            continue
+        nx = dx / dist
+        ny = dy / dist
+        nz = dz / dist
+        a = sph_radius[i] - 0.5 * delta
+        cx = sph_pos[i, 0] + a * nx
+        cy = sph_pos[i, 1] + a * ny
+        cz = sph_pos[i, 2] + a * nz
+        bi = sph_block[i]
+        bj = sph_block[j]
+        rix = cx - pos[bi, 0]
+        riy = cy - pos[bi, 1]
+        riz = cz - pos[bi, 2]
+        rjx = cx - pos[bj, 0]
+        rjy = cy - pos[bj, 1]
+        rjz = cz - pos[bj, 2]
+        ai = _pointvel(vel, omega, bi, rix, riy, riz)
+        aj = _pointvel(vel, omega, bj, rjx, rjy, rjz)
+        ux, uy, uz = ai[0] - aj[0], ai[1] - aj[1], ai[2] - aj[2]
+        if delta <= 0.0:
+            d_d += _release(nx, ny, nz, ux, uy, uz, hist[p], dt)
+            pair_f[p, 0] = 0.0
+            pair_f[p, 1] = 0.0
+            pair_f[p, 2] = 0.0
+            continue
+        if fixed[bi]:
+            mstar = mass[bj]
+        elif fixed[bj]:
+            mstar = mass[bi]
+        else:
+            mstar = mass[bi] * mass[bj] / (mass[bi] + mass[bj])
+        k, kt, h, mu = _mix(mat_k, mat_kt, mat_h, mat_mu, sph_material[i], sph_material[j])
+        c = 2.0 * h * math.sqrt(mstar * k)
+        ct = 2.0 * h * math.sqrt(mstar * kt)
+        fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[p], k, kt, c, ct, mu, clip, dt)
+        pair_f[p, 0] = fx
+        pair_f[p, 1] = fy
+        pair_f[p, 2] = fz
+        pair_x[p, 0] = cx
+        pair_x[p, 1] = cy
+        pair_x[p, 2] = cz
+        e_s += es
+        d_d += dd
+        d_f += df
+        ncon += 1
+    return e_s, d_d, d_f, ncon
+
+
+@nb.njit(cache=True, parallel=True)
+def gather_pair_forces(blk_sph_start, pos, sp_start, sp_pair, sp_sign, pair_f, pair_x, force, torque):
+    """force[b] += Σ ±pair_f over the pairs of b's spheres; torque about pos[b] likewise."""
+    for b in nb.prange(pos.shape[0]):
+        fx = fy = fz = tx = ty = tz = 0.0
+        for s in range(blk_sph_start[b], blk_sph_start[b + 1]):
+            for k in range(sp_start[s], sp_start[s + 1]):
+                p = sp_pair[k]
+                sg = sp_sign[k]
+                gx = sg * pair_f[p, 0]
+                gy = sg * pair_f[p, 1]
+                gz = sg * pair_f[p, 2]
+                if gx == 0.0 and gy == 0.0 and gz == 0.0:
+                    continue
+                rx = pair_x[p, 0] - pos[b, 0]
+                ry = pair_x[p, 1] - pos[b, 1]
+                rz = pair_x[p, 2] - pos[b, 2]
+                fx += gx
+                fy += gy
+                fz += gz
+                tx += ry * gz - rz * gy
+                ty += rz * gx - rx * gz
+                tz += rx * gy - ry * gx
+        force[b, 0] += fx
+        force[b, 1] += fy
+        force[b, 2] += fz
+        torque[b, 0] += tx
+        torque[b, 1] += ty
+        torque[b, 2] += tz
+
+
+@nb.njit(cache=True)
+def closest_point_triangle(px, py, pz, a, b, c):
+    """Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision Detection §5.1.5)."""
+    abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    acx, acy, acz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    apx, apy, apz = px - a[0], py - a[1], pz - a[2]
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return a[0], a[1], a[2]
+    bpx, bpy, bpz = px - b[0], py - b[1], pz - b[2]
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return b[0], b[1], b[2]
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return a[0] + v * abx, a[1] + v * aby, a[2] + v * abz
+    cpx, cpy, cpz = px - c[0], py - c[1], pz - c[2]
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return c[0], c[1], c[2]
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return a[0] + w * acx, a[1] + w * acy, a[2] + w * acz
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return b[0] + w * (c[0] - b[0]), b[1] + w * (c[1] - b[1]), b[2] + w * (c[2] - b[2])
+    den = 1.0 / (va + vb + vc)
+    v = vb * den
+    w = vc * den
+    return a[0] + abx * v + acx * w, a[1] + aby * v + acy * w, a[2] + abz * v + acz * w
+
+
+@nb.njit(cache=True, parallel=True)
+def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omega, mass, fixed,
+                planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, hist,
+                mat_k, mat_kt, mat_h, mat_mu, clip, dt, force, torque):
+    """Sphere–wall contact: half-spaces ``planes`` (n_x, n_y, n_z, d) with the unit normal n
+    pointing into the domain (spheres live where n·x ≥ d) and triangle meshes (one
+    contact per sphere and mesh: the nearest triangle). History ``hist`` is (ns, nplanes +
+    nmesh, 3). Adds into force/torque; returns (spring energy, dashpot loss, slider loss)."""
+    npl = planes.shape[0]
+    e_s = 0.0
+    d_d = 0.0
+    d_f = 0.0
+    for b in nb.prange(pos.shape[0]):
+        if fixed[b]:
+            continue
+        for s in range(blk_sph_start[b], blk_sph_start[b + 1]):
+            r = sph_radius[s]
+            px, py, pz = sph_pos[s, 0], sph_pos[s, 1], sph_pos[s, 2]
+            for w in range(npl + nmesh):
+                if w < npl:
+                    gap = planes[w, 0] * px + planes[w, 1] * py + planes[w, 2] * pz - planes[w, 3]
+                    delta = r - gap
+                    nx, ny, nz = -planes[w, 0], -planes[w, 1], -planes[w, 2]
+                    wm = plane_mat[w]
+                else:
+                    m = w - npl
+                    best = 1e300
+                    qx = qy = qz = 0.0
+                    for t in range(tris.shape[0]):
+                        if tri_mesh[t] != m:
+                            continue
+                        cx, cy, cz = closest_point_triangle(px, py, pz, tris[t, 0], tris[t, 1], tris[t, 2])
+                        d2 = (px - cx) ** 2 + (py - cy) ** 2 + (pz - cz) ** 2
+                        if d2 < best:
+                            best = d2
+                            qx, qy, qz = cx, cy, cz
+                    gap = math.sqrt(best)
+                    delta = r - gap
+                    if gap > 0.0:
+                        nx, ny, nz = (qx - px) / gap, (qy - py) / gap, (qz - pz) / gap
+                    else:
+                        nx = ny = nz = 0.0
+                    wm = mesh_mat[m]
+                if delta <= 0.0 and hist[s, w, 3] == 0.0 and hist[s, w, 4] == 0.0 and \
+                        hist[s, w, 5] == 0.0 and hist[s, w, 6] == 0.0:
+                    hist[s, w, 0] = 0.0
+                    hist[s, w, 1] = 0.0
+                    hist[s, w, 2] = 0.0
+                    continue
+                if nx == 0.0 and ny == 0.0 and nz == 0.0:
+                    for q in range(hist.shape[2]):
+                        hist[s, w, q] = 0.0
+                    continue
+                a = r - 0.5 * delta
+                cx = px + a * nx
+                cy = py + a * ny
+                cz = pz + a * nz
+                rx = cx - pos[b, 0]
+                ry = cy - pos[b, 1]
+                rz = cz - pos[b, 2]
+                ux, uy, uz = _pointvel(vel, omega, b, rx, ry, rz)
+                if delta <= 0.0:
+                    d_d += _release(nx, ny, nz, ux, uy, uz, hist[s, w], dt)
+                    continue
+                k, kt, h, mu = _mix(mat_k, mat_kt, mat_h, mat_mu, sph_material[s], wm)
+                c = 2.0 * h * math.sqrt(mass[b] * k)
+                ct = 2.0 * h * math.sqrt(mass[b] * kt)
+                fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[s, w],
+                                              k, kt, c, ct, mu, clip, dt)
+                force[b, 0] += fx
+                force[b, 1] += fy
+                force[b, 2] += fz
+                torque[b, 0] += ry * fz - rz * fy
+                torque[b, 1] += rz * fx - rx * fz
+                torque[b, 2] += rx * fy - ry * fx
+                e_s += es
+                d_d += dd
+                d_f += df
+    return e_s, d_d, d_f
+
+
+# ---------------------------------------------------------------- NumPy reference
+def pair_forces_ref(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, vel, omega,
+                    mass, fixed, mat_k, mat_kt, mat_h, mat_mu, clip, dt):
+    """Vectorised NumPy version of :func:`pair_forces` + :func:`gather_pair_forces`.
+    Returns (force, torque, new_hist, (e_spring, d_dash, d_fric))."""
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = sph_pos[j] - sph_pos[i]
+    dist = np.linalg.norm(d, axis=1)
+    delta = sph_radius[i] + sph_radius[j] - dist
+    on = delta > 0
+    n = d / np.where(dist > 0, dist, 1)[:, None]
+    xc = sph_pos[i] + (sph_radius[i] - 0.5 * delta)[:, None] * n
+    bi, bj = sph_block[i], sph_block[j]
+    u = (vel[bi] + np.cross(omega[bi], xc - pos[bi])) - (vel[bj] + np.cross(omega[bj], xc - pos[bj]))
+    v = u
+    mi, mj = mass[bi], mass[bj]
+    mstar = np.where(fixed[bi], mj, np.where(fixed[bj], mi, mi * mj / (mi + mj)))
+    a, b = sph_material[i], sph_material[j]
+    k = 2 * mat_k[a] * mat_k[b] / (mat_k[a] + mat_k[b])
+    kt = 2 * mat_kt[a] * mat_kt[b] / (mat_kt[a] + mat_kt[b])
+    h = 0.5 * (mat_h[a] + mat_h[b])
+    mu = np.minimum(mat_mu[a], mat_mu[b])
+    c, ct = 2 * h * np.sqrt(mstar * k), 2 * h * np.sqrt(mstar * kt)
+    vn = np.sum(v * n, axis=1)
+    vt = v - vn[:, None] * n
+    un = np.sum(u * n, axis=1)
+    ut = u - un[:, None] * n
+    FN = k * delta + c * vn
+    if clip:
+        FN = np.maximum(FN, 0.0)
+    fdn = FN - k * delta
+    d_dash = 0.5 * (fdn + hist[:, 3]) * un * dt
+    hh = hist[:, :3].copy()
+    h2 = np.sum(hh * hh, axis=1)
+    hp = hh - np.sum(hh * n, axis=1)[:, None] * n
+    p2 = np.sum(hp * hp, axis=1)
+    scale = np.where((h2 > 0) & (p2 > 0), np.sqrt(h2 / np.where(p2 > 0, p2, 1)), 1.0)
+    hh = np.where((h2 > 0)[:, None], hp * scale[:, None], hh) + ut * dt
+    ft = -kt[:, None] * hh - ct[:, None] * vt
+    ftn = np.linalg.norm(ft, axis=1)
+    fmax = mu * FN
+    slip = ftn > fmax
+    ft_s = ft * np.where(ftn > 0, fmax / np.where(ftn > 0, ftn, 1), 0)[:, None]
+    h_s = -ft_s / kt[:, None]
+    d_fric = np.where(slip, fmax * np.linalg.norm(hh - h_s, axis=1), 0.0)
+    g = np.where(slip[:, None], 0.0, -ct[:, None] * vt)
+    d_dash = d_dash - 0.5 * np.sum((g + hist[:, 4:7]) * ut, axis=1) * dt
+    ft = np.where(slip[:, None], ft_s, ft)
+    hh = np.where(slip[:, None], h_s, hh)
+    f = -FN[:, None] * n + ft
+    e_s = 0.5 * k * delta ** 2 + 0.5 * kt * np.sum(hh * hh, axis=1)
+    new_hist = np.concatenate([hh, fdn[:, None], g], axis=1)
+    # released contacts: last half of the dashpot trapezoid, history reset
+    rel = 0.5 * hist[:, 3] * un * dt - 0.5 * np.sum(hist[:, 4:7] * ut, axis=1) * dt
+    d_dash = np.where(on, d_dash, rel)
+    f[~on] = 0
+    new_hist[~on] = 0
+    force = np.zeros_like(pos)
+    torque = np.zeros_like(pos)
+    np.add.at(force, bi, f)
+    np.add.at(force, bj, -f)
+    np.add.at(torque, bi, np.cross(xc - pos[bi], f))
+    np.add.at(torque, bj, np.cross(xc - pos[bj], -f))
+    return force, torque, new_hist, (e_s[on].sum(), d_dash.sum(), d_fric[on].sum())
+
+
+class Materials:
+    """Per-material arrays for the kernels: k [N/m], k_t [N/m], h [-], μ [-]."""
+
+    def __init__(self, k, kt, h, mu):
+        self.k = np.asarray(k, np.float64)
+        self.kt = np.asarray(kt, np.float64)
+        self.h = np.asarray(h, np.float64)
+        self.mu = np.asarray(mu, np.float64)
+
+
+class SphereContact:
+    """Interaction: sphere–sphere contact between different blocks over a Verlet list."""
+
+    name = "contact"
+
+    def __init__(self, materials: Materials, skin: float, clip_normal: bool = True):
+        self.mat = materials
+        self.clip = bool(clip_normal)
+        self.neighbours = NeighbourList(skin)
+        self.hist = np.zeros((0, HIST))
+        self.pair_f = np.zeros((0, 3))
+        self.pair_x = np.zeros((0, 3))
+        self.n_contacts = 0
+
+    def add_forces(self, state, force, torque, ledger, dt):
+        nl = self.neighbours
+        if nl.needs_rebuild(state.sph_pos):
+            old = nl.rebuild(state.sph_pos, state.sph_radius, state.sph_block)
+            self.hist = carry_history(old, self.hist, nl.pairs, state.ns)
+            self.pair_f = np.zeros((len(nl.pairs), 3))
+            self.pair_x = np.zeros((len(nl.pairs), 3))
+        if len(nl.pairs) == 0:
+            self.n_contacts = 0
+            return
+        m = self.mat
+        es, dd, df, nc = pair_forces(nl.pairs, self.hist, state.sph_pos, state.sph_radius, state.sph_block,
+                                     state.sph_material, state.pos, state.vel, state.omega, state.mass,
+                                     state.fixed, m.k, m.kt, m.h, m.mu, self.clip, dt, self.pair_f, self.pair_x)
+        gather_pair_forces(state.blk_sph_start, state.pos, nl.sp_start, nl.sp_pair, nl.sp_sign,
+                           self.pair_f, self.pair_x, force, torque)
+        self.n_contacts = nc
+        ledger[L_SPRING] += es
+        ledger[L_DASHPOT] += dd
+        ledger[L_FRICTION] += df
+
+    def stiffness_bound(self):
+        return float(self.mat.k.max()), float(self.mat.h.max())
+
+    def checkpoint_arrays(self):
+        nl = self.neighbours
+        ref = nl.ref_pos if nl.ref_pos is not None else np.zeros((0, 3))
+        return {"pairs": nl.pairs, "hist": self.hist, "ref_pos": ref}
+
+    def restore(self, arrays):
+        nl = self.neighbours
+        nl.pairs = np.asarray(arrays["pairs"], np.int64).reshape(-1, 2)
+        self.hist = np.asarray(arrays["hist"], np.float64).reshape(-1, HIST)
+        ref = np.asarray(arrays["ref_pos"], np.float64).reshape(-1, 3)
+        nl.ref_pos = ref if len(ref) else None
+        from .neighbours import sphere_pair_map
+        ns = len(ref) if len(ref) else int(nl.pairs.max() + 1 if len(nl.pairs) else 0)
+        nl.sp_start, nl.sp_pair, nl.sp_sign = sphere_pair_map(nl.pairs, ns)
+        self.pair_f = np.zeros((len(nl.pairs), 3))
+        self.pair_x = np.zeros((len(nl.pairs), 3))
+
+
+class WallContact:
+    """Interaction: spheres against static planes (boxes are 6 inward planes) and
+    triangle meshes."""
+
+    name = "walls"
+
+    def __init__(self, materials: Materials, planes, plane_mat, tris, tri_mesh, mesh_mat, ns,
+                 clip_normal: bool = True):
+        self.mat = materials
+        self.clip = bool(clip_normal)
+        self.planes = np.asarray(planes, np.float64).reshape(-1, 4)
+        self.plane_mat = np.asarray(plane_mat, np.int64).reshape(-1)
+        self.tris = np.asarray(tris, np.float64).reshape(-1, 3, 3)
+        self.tri_mesh = np.asarray(tri_mesh, np.int64).reshape(-1)
+        self.mesh_mat = np.asarray(mesh_mat, np.int64).reshape(-1)
+        self.hist = np.zeros((ns, len(self.planes) + len(self.mesh_mat), HIST))
+
+    def add_forces(self, state, force, torque, ledger, dt):
+        if self.hist.shape[1] == 0:
+            return
+        m = self.mat
+        es, dd, df = wall_forces(state.blk_sph_start, state.sph_pos, state.sph_radius, state.sph_material,
+                                 state.pos, state.vel, state.omega, state.mass, state.fixed,
+                                 self.planes, self.plane_mat, self.tris, self.tri_mesh, self.mesh_mat,
+                                 len(self.mesh_mat), self.hist, m.k, m.kt, m.h, m.mu, self.clip, dt,
+                                 force, torque)
+        ledger[L_SPRING] += es
+        ledger[L_DASHPOT] += dd
+        ledger[L_FRICTION] += df
+
+    def stiffness_bound(self):
+        return float(self.mat.k.max()), float(self.mat.h.max())
+
+    def checkpoint_arrays(self):
+        return {"hist": self.hist}
+
+    def restore(self, arrays):
+        self.hist = np.asarray(arrays["hist"], np.float64).reshape(self.hist.shape)

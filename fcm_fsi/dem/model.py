@@ -1,0 +1,159 @@
+"""A :class:`DEMSystem` from a ``DEMConfig``: blocks, generators, walls, controls, and the
+stable-time-step check (tutorial §6)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..config.dem import BlockConfig, DEMConfig, GeneratorConfig, WallConfig
+from ..config.loader import ConfigError
+from ..io.logging import get_logger
+from .bodies import BlockTemplate, axis_angle_quat, box_template, clump_template, matrix_to_quat
+from .contact import Materials, SphereContact, WallContact, damping_ratio
+from .control import Control, Controls
+from .state import DEMState, quat_to_matrix_np
+from .system import DEMSystem
+
+log = get_logger("dem")
+
+
+def template_of(b: BlockConfig, density: float) -> BlockTemplate:
+    """Mass properties and spheres of one block description (principal frame)."""
+    if b.shape == "box":
+        return box_template(b.size, density, b.radius, b.spacing)
+    if b.shape == "sphere":
+        return clump_template([[0.0, 0.0, 0.0]], [b.radius], density)
+    s = np.asarray(b.spheres, np.float64)
+    return clump_template(s[:, :3], s[:, 3], density)
+
+
+def materials_of(cfg: DEMConfig) -> Materials:
+    m = cfg.materials
+    return Materials([x.stiffness for x in m], [x.stiffness * x.tangential_ratio for x in m],
+                     [damping_ratio(x.restitution) for x in m], [x.mu for x in m])
+
+
+def _generated(g: GeneratorConfig, tmpl: BlockTemplate) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (count, 3) on a jittered cubic lattice and orientations (count, 4)."""
+    rng = np.random.default_rng(g.seed)
+    R = float(np.max(np.linalg.norm(tmpl.sph_local, axis=1) + tmpl.sph_radius))
+    a = 2.0 * R * 1.05
+    lo, hi = np.asarray(g.region_min) + R, np.asarray(g.region_max) - R
+    n = np.maximum(np.floor((hi - lo) / a).astype(int) + 1, 1)
+    if np.any(hi < lo) or np.prod(n) < g.count:
+        raise ConfigError(f"key 'dem.generators[].count' = {g.count} blocks of bounding radius {R:.4g} m "
+                          f"do not fit in region {g.region_min}..{g.region_max} (room for {int(np.prod(n)) if np.all(hi >= lo) else 0})")
+    idx = np.arange(g.count)
+    ijk = np.stack([idx % n[0], (idx // n[0]) % n[1], idx // (n[0] * n[1])], axis=1)
+    pos = lo + a * ijk + rng.uniform(-0.02 * R, 0.02 * R, size=(g.count, 3))
+    if g.random_orientation:
+        q = rng.normal(size=(g.count, 4))
+        q /= np.linalg.norm(q, axis=1)[:, None]
+    else:
+        q = np.tile([1.0, 0.0, 0.0, 0.0], (g.count, 1))
+    return pos, q
+
+
+def _qmul(p, q):
+    w1, v1, w2, v2 = p[0], p[1:], q[0], q[1:]
+    return np.concatenate([[w1 * w2 - v1 @ v2], w1 * v2 + w2 * v1 + np.cross(v1, v2)])
+
+
+def build_state(cfg: DEMConfig) -> DEMState:
+    """All blocks (cfg.blocks, then generated) as a DEMState."""
+    pos, quat, mass, inertia, vel, omega, fixed = [], [], [], [], [], [], []
+    sb, sl, sr, sm = [], [], [], []
+
+    def add(tmpl: BlockTemplate, b: BlockConfig, p, q_user):
+        k = len(pos)
+        # principal frame → user frame is R_body; world = q_user ∘ R_body
+        q = _qmul(q_user, matrix_to_quat(tmpl.R_body))
+        origin_shift = tmpl.R_body @ np.zeros(3)
+        if b.shape == "clump":   # clump spheres are given relative to `position`: move to the com
+            s = np.asarray(b.spheres)[:, :3]
+            ms = s[:, 0] * 0 + np.asarray(b.spheres)[:, 3] ** 3
+            origin_shift = (ms[:, None] * s).sum(0) / ms.sum()
+        pos.append(np.asarray(p) + quat_to_matrix_np(np.asarray(q_user)) @ origin_shift)
+        quat.append(q)
+        mass.append(tmpl.mass)
+        inertia.append(tmpl.inertia)
+        vel.append(b.velocity)
+        omega.append(b.omega)
+        fixed.append(b.fixed)
+        sb.extend([k] * len(tmpl.sph_radius))
+        sl.extend(tmpl.sph_local)
+        sr.extend(tmpl.sph_radius)
+        sm.extend([cfg.material_index(b.material)] * len(tmpl.sph_radius))
+
+    for b in cfg.blocks:
+        dens = cfg.materials[cfg.material_index(b.material)].density
+        add(template_of(b, dens), b, b.position, axis_angle_quat(b.axis, math.radians(b.angle)))
+    for g in cfg.generators:
+        dens = cfg.materials[cfg.material_index(g.block.material)].density
+        tmpl = template_of(g.block, dens)
+        P, Q = _generated(g, tmpl)
+        for p, q in zip(P, Q):
+            add(tmpl, g.block, p, q)
+    return DEMState.from_blocks(pos, quat, mass, inertia, sb, sl, sr, sm, vel=vel, omega=omega, fixed=fixed)
+
+
+def walls_of(cfg: DEMConfig, mats: Materials, ns: int, clip: bool) -> WallContact | None:
+    planes, pmat, tris, tmesh, mmat = [], [], [], [], []
+    for w in cfg.walls:
+        mi = cfg.material_index(w.material)
+        if w.kind == "plane":
+            n = np.asarray(w.normal, np.float64)
+            n /= np.linalg.norm(n)
+            planes.append([*n, float(n @ np.asarray(w.point))])
+            pmat.append(mi)
+        elif w.kind == "box":
+            lo, hi = np.asarray(w.lo), np.asarray(w.hi)
+            for d in range(3):
+                if d == 2 and w.open_top:
+                    faces = [(lo, 1.0)]
+                else:
+                    faces = [(lo, 1.0), (hi, -1.0)]
+                for corner, sgn in faces:
+                    n = np.zeros(3)
+                    n[d] = sgn
+                    planes.append([*n, sgn * corner[d]])
+                    pmat.append(mi)
+        else:
+            V = np.asarray(w.vertices, np.float64)
+            for t in w.triangles:
+                tris.append(V[list(t)])
+                tmesh.append(len(mmat))
+            mmat.append(mi)
+    if not planes and not tris:
+        return None
+    return WallContact(mats, np.reshape(planes, (-1, 4)), pmat, np.reshape(tris, (-1, 3, 3)), tmesh, mmat, ns, clip)
+
+
+def build_system(cfg: DEMConfig, with_ledger: bool = True) -> DEMSystem:
+    """Blocks, contact, walls, controls; refuses dt > dt_safety·Δt_cr (ConfigError)."""
+    state = build_state(cfg)
+    mats = materials_of(cfg)
+    skin = cfg.skin if cfg.skin is not None else 0.3 * float(state.sph_radius.min())
+    inter = [SphereContact(mats, skin, cfg.clip_normal)]
+    walls = walls_of(cfg, mats, state.ns, cfg.clip_normal)
+    if walls is not None:
+        inter.append(walls)
+    controls = None
+    if cfg.controls:
+        controls = Controls([Control(c.block, tuple(c.modes), tuple(c.values), c.ramp) for c in cfg.controls], state)
+    system = DEMSystem(state, inter, cfg.dt, cfg.gravity, controls, with_ledger)
+    check_time_step(system, cfg.dt_safety)
+    return system
+
+
+def check_time_step(system: DEMSystem, safety: float) -> float:
+    """Refuse dt above safety·Δt_cr; log the margin. Returns Δt_cr."""
+    dtc = system.critical_time_step()
+    if system.dt > safety * dtc:
+        raise ConfigError(f"key 'dem.dt' = {system.dt:.4g} s exceeds dt_safety × Δt_cr = {safety:g} × "
+                          f"{dtc:.4g} s = {safety * dtc:.4g} s (Δt_cr = 2√(m/k)(√(h²+1) − h), lightest "
+                          f"effective contact mass, stiffest contact; see docs/dem.md)")
+    log.info("DEM time step %.4g s = %.3f Δt_cr (Δt_cr = %.4g s, allowed up to %.3g)", system.dt,
+             system.dt / dtc, dtc, safety)
+    return dtc
