@@ -6,8 +6,7 @@ import pytest
 
 from fcm_fsi.config.loader import ConfigError, build
 from fcm_fsi.config.structure import CohesiveConfig, StructureConfig
-from fcm_fsi.dem.builder import (KINDS, assemble, build_building, load_structure,
-                                 surface_spheres)
+from fcm_fsi.dem.builder import KINDS, assemble, build_building, load_structure
 from fcm_fsi.dem.cohesive import CohesiveLaw
 
 PAPER = Path(__file__).resolve().parents[1] / "cases" / "building_paper.yaml"
@@ -83,11 +82,6 @@ def test_spheres_sit_on_the_surface_and_mass_from_the_solid_box(paper):
     assert s.inertia[col, 0] == pytest.approx(s.mass[col] * (e[1] ** 2 + e[2] ** 2) / 12)
 
 
-def test_surface_spheres_hollow_cube():
-    pts = surface_spheres(np.array([1.0, 1.0, 1.0]), 0.1)
-    assert len(pts) == 5 ** 3 - 3 ** 3  # 5 per edge, interior 3×3×3 removed
-
-
 def test_built_structure_is_stress_free(paper):
     cfg, coh, s = paper
     bonds = s.bonds(CohesiveLaw.from_config(coh), coh.points_per_edge)
@@ -102,7 +96,7 @@ def test_built_structure_is_stress_free(paper):
 def cfg_dict(**changes):
     d = dict(storeys=1, storey_height=3.0, bays_x=[4.0], bays_y=[4.0], column=[0.4, 0.4],
              wall_thickness=0.2, slab_thickness=0.2, block_size=1.0, sphere_radius=0.1,
-             density=2400.0)
+             material="concrete", density=2400.0)
     d.update(changes)
     return d
 
@@ -119,6 +113,15 @@ def cfg_dict(**changes):
 def test_structure_config_errors(changes, words):
     with pytest.raises(ConfigError, match=words):
         build(StructureConfig, cfg_dict(**changes), "case.yaml", prefix="dem.structure")
+
+
+def test_density_comes_from_the_material_when_not_given():
+    cfg = build(StructureConfig, cfg_dict(density=None))
+    s = build_building(cfg, material_index=2, material_density=2000.0)
+    np.testing.assert_allclose(s.mass, 2000.0 * np.prod(s.hi - s.lo, axis=1))
+    assert np.all(s.sph_material == 2)
+    with pytest.raises(ConfigError, match="density"):
+        build_building(cfg)
 
 
 def test_blocks_thinner_than_two_radii_are_refused():

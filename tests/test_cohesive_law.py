@@ -101,6 +101,15 @@ def test_reversible_unloads_along_curve_damage_along_secant():
     assert tn_back[0] == pytest.approx(SC * float(shape_g(0.5)), rel=1e-12)
 
 
+def test_damage_loading_stored_plus_dissipated_equals_work():
+    """Monotonic loading in damage mode: stored + dissipated = ∫σ dδ, same as reversible."""
+    d = np.linspace(0, 0.9 * DF, 200)
+    _, _, st_r, di_r, _, _ = law(d)
+    _, _, st_d, di_d, _, _ = law(d, damage=True)
+    np.testing.assert_allclose(st_d + di_d, st_r + di_r, rtol=1e-12, atol=1e-9)
+    assert np.all(di_r == 0.0) and np.all(di_d[1:] > 0.0)
+
+
 def test_broken_for_good_in_both_modes():
     for damage in (False, True):
         tn, _, st, di, lm, br = law(1.0001 * DF, damage=damage)

@@ -61,8 +61,8 @@ class StructureConfig:
     openings: tuple[OpeningConfig, ...] = param((), doc="doors and windows")
     block_size: float = param(unit="m", doc="largest block edge; members are cut into equal blocks no longer than this", gt=0)
     sphere_radius: float = param(unit="m", doc="radius of the surface spheres (every block edge must be >= 2 radii)", gt=0)
-    density: float = param(unit="kg/m³", doc="density of the solid blocks (mass and inertia come from the box)", gt=0)
-    material: int = param(0, doc="sphere material index in the DEM material table", ge=0)
+    material: str = param(doc="material name in dem.materials (contact parameters of the spheres)")
+    density: float | None = param(None, unit="kg/m³", doc="density of the solid blocks (mass and inertia come from the box); null = the material's density", gt=0)
 
     def __post_init__(self) -> None:
         if not self.bays_x or not self.bays_y:

@@ -1,9 +1,10 @@
 """Structure builder: a compact building description → box blocks, surface spheres, bonds.
 
-Every block is an axis-aligned solid box (mass and principal inertia from the box and the
-density, body frame = box axes, so the orientation starts at the identity). Spheres sit only
-on the block surface: their centres lie on the surface of the box shrunk by one radius, so
-the spheres' envelope is the box and the spheres of two touching blocks just touch. Every
+Every block is an axis-aligned solid box (:func:`fcm_fsi.dem.bodies.box_template`: mass and
+principal inertia from the box and the density, body frame = box axes, so the orientation
+starts at the identity). Spheres sit only on the block surface: their centres lie on the
+surface of the box shrunk by one radius, so the spheres' envelope is the box and the spheres
+of two touching blocks just touch. Every
 pair of blocks sharing a face of positive area gets one cohesive bond on the shared
 rectangle (:class:`fcm_fsi.dem.cohesive.BondFace`).
 
@@ -20,6 +21,7 @@ import numpy as np
 
 from ..config.loader import ConfigError
 from ..config.structure import StructureConfig
+from .bodies import box_template
 from .cohesive import BondFace, CohesiveBonds, CohesiveLaw
 
 KINDS = ("column", "wall", "slab", "block")
@@ -67,33 +69,6 @@ class Structure:
         return CohesiveBonds.from_faces(law, self.faces, self.pos, self.quat, points_per_edge)
 
 
-def box_mass_properties(lo: np.ndarray, hi: np.ndarray, density: float):
-    """Mass [kg] and principal inertia [kg m²] of solid boxes (nb, 3) about their centres."""
-    e = hi - lo
-    m = density * e.prod(axis=1)
-    sq = e ** 2
-    inertia = m[:, None] / 12.0 * np.stack([sq[:, 1] + sq[:, 2], sq[:, 0] + sq[:, 2],
-                                            sq[:, 0] + sq[:, 1]], axis=1)
-    return m, inertia
-
-
-def surface_spheres(extent: np.ndarray, radius: float) -> np.ndarray:
-    """Centres (body frame, about the box centre) of spheres covering a box's surface.
-
-    Centres lie on the box shrunk by ``radius`` on a grid of spacing ≈ 2·radius, keeping only
-    grid points on that shrunk box's boundary (a flat or thin box keeps its single layer)."""
-    inner = np.asarray(extent, float) - 2 * radius
-    axes = []
-    for L in inner:
-        n = max(1, int(round(L / (2 * radius))) + 1) if L > 1e-12 else 1
-        axes.append(np.linspace(-L / 2, L / 2, n) if n > 1 else np.zeros(1))
-    idx = np.stack(np.meshgrid(*[np.arange(len(a)) for a in axes], indexing="ij"), -1).reshape(-1, 3)
-    counts = np.array([len(a) for a in axes])
-    on_surface = np.any((idx == 0) | (idx == counts - 1), axis=1)
-    idx = idx[on_surface]
-    return np.stack([axes[k][idx[:, k]] for k in range(3)], axis=1)
-
-
 def touching_faces(lo: np.ndarray, hi: np.ndarray, tol: float = 1e-6) -> list[BondFace]:
     """Faces of positive area shared by pairs of non-overlapping axis-aligned boxes.
 
@@ -134,17 +109,19 @@ def assemble(lo, hi, *, density: float, sphere_radius: float, material: int = 0,
         raise ConfigError(f"block {b} ({KINDS[kind[b]] if kind is not None else 'box'}) has an edge of "
                           f"{ext[b].min():g} m, thinner than two sphere radii "
                           f"(2·{sphere_radius:g} m); use larger members or smaller spheres")
-    mass, inertia = box_mass_properties(lo, hi, density)
-    sph = [surface_spheres(ext[b], sphere_radius) for b in range(lo.shape[0])]
+    ext = np.where(np.abs(ext - 2 * sphere_radius) < 1e-9, 2 * sphere_radius, ext)  # round-off
+    tmpl = [box_template(ext[b], density, sphere_radius) for b in range(lo.shape[0])]
     nb = lo.shape[0]
+    ns = [len(t.sph_radius) for t in tmpl]
     return Structure(
         lo=lo, hi=hi,
         kind=np.full(nb, KINDS.index("block")) if kind is None else np.asarray(kind, np.int64),
         storey=np.full(nb, -1) if storey is None else np.asarray(storey, np.int64),
-        mass=mass, inertia=inertia,
-        sph_block=np.concatenate([np.full(len(s), b) for b, s in enumerate(sph)]).astype(np.int64),
-        sph_local=np.concatenate(sph), sph_radius=np.full(sum(map(len, sph)), sphere_radius),
-        sph_material=np.full(sum(map(len, sph)), material, dtype=np.int64),
+        mass=np.array([t.mass for t in tmpl]), inertia=np.array([t.inertia for t in tmpl]),
+        sph_block=np.repeat(np.arange(nb), ns).astype(np.int64),
+        sph_local=np.concatenate([t.sph_local for t in tmpl]),
+        sph_radius=np.concatenate([t.sph_radius for t in tmpl]),
+        sph_material=np.full(sum(ns), material, dtype=np.int64),
         faces=touching_faces(lo, hi, tol=1e-6 * max(1.0, float(np.abs(hi).max()))))
 
 
@@ -217,11 +194,18 @@ def building_boxes(cfg: StructureConfig):
             np.concatenate(storeys))
 
 
-def build_building(cfg: StructureConfig) -> Structure:
-    """The building of ``cfg`` as blocks with surface spheres and the faces to bond."""
+def build_building(cfg: StructureConfig, material_index: int = 0,
+                   material_density: float | None = None) -> Structure:
+    """The building of ``cfg`` as blocks with surface spheres and the faces to bond.
+
+    ``material_index`` is the position of ``cfg.material`` in the DEM material table;
+    ``material_density`` that material's density, used when ``cfg.density`` is null."""
+    density = cfg.density if cfg.density is not None else material_density
+    if density is None:
+        raise ConfigError("key 'dem.structure.density' is null and no material density was given")
     lo, hi, kind, storey = building_boxes(cfg)
-    return assemble(lo, hi, density=cfg.density, sphere_radius=cfg.sphere_radius,
-                    material=cfg.material, kind=kind, storey=storey)
+    return assemble(lo, hi, density=density, sphere_radius=cfg.sphere_radius,
+                    material=material_index, kind=kind, storey=storey)
 
 
 def load_structure(path) -> tuple[StructureConfig, "CohesiveConfig | None"]:

@@ -73,7 +73,10 @@ def traction_reference(dn, dt, lam_max, broken, *, sigma_c: float, delta_f: floa
     g_over_l_load = np.where(lam > 0, shape_g(lam) / np.where(lam > 0, lam, 1.0), 6.75)
     g_over_l_unl = np.where(lmax > 0, shape_g(lmax) / np.where(lmax > 0, lmax, 1.0), 6.75)
     s = np.where(loading, g_over_l_load, g_over_l_unl)
-    stored = np.where(loading, shape_psi(lam), 0.5 * g_over_l_unl * lam ** 2) * sigma_c * delta_f
+    if damage:  # secant energy; the rest of ψ(λ_max) is dissipated
+        stored = 0.5 * s * lam ** 2 * sigma_c * delta_f
+    else:
+        stored = shape_psi(lam) * sigma_c * delta_f
     tn = sigma_c * s * np.maximum(dn, 0.0) / delta_f
     tt = sigma_c * s * dt * delta_f / delta_tc ** 2
     comp = np.minimum(dn, 0.0)
@@ -120,14 +123,16 @@ def point_law(dn, dt, lam_max, sigma_c, delta_f, delta_tc, k_pen, damage):
     lmax = lam_max if lam_max > lam else lam
     if lmax >= 1.0:
         return 0.0, 0.0, 0.0, 0.5625 * sigma_c * delta_f, lmax, True
-    if lam >= lmax or not damage:  # loading, or reversible
+    diss = 0.0
+    if not damage:  # reversible: the curve both ways, all work stored
         s = _g(lam) / lam if lam > 0.0 else 6.75
         stored = _psi(lam) * sigma_c * delta_f
-    else:  # damage unloading: secant to the origin
-        s = _g(lmax) / lmax
+    else:  # damage: secant stiffness of λ_max; stored = secant energy, the rest is lost
+        if lam >= lmax:  # loading on the curve (λ_max = λ)
+            s = _g(lam) / lam if lam > 0.0 else 6.75
+        else:
+            s = _g(lmax) / lmax
         stored = 0.5 * s * lam * lam * sigma_c * delta_f
-    diss = 0.0
-    if damage:
         diss = (_psi(lmax) - 0.5 * _g(lmax) * lmax) * sigma_c * delta_f
     tn = sigma_c * s * dnp / delta_f
     tt = sigma_c * s * dt * delta_f / (delta_tc * delta_tc)
@@ -156,15 +161,13 @@ def point_law_array(dn, dt, lam_max, broken, sigma_c, delta_f, delta_tc, k_pen, 
     return tn, tt, st, di, lm, br
 
 
-@numba.njit(cache=True)
-def _rotate(q, v):
-    """R(q) v for a unit quaternion q = (w, x, y, z)."""
+@numba.njit(cache=True, inline="always")
+def _rotate(q, v0, v1, v2):
+    """R(q) v for a unit quaternion q = (w, x, y, z); returns the three components."""
     w, x, y, z = q[0], q[1], q[2], q[3]
-    r = np.empty(3)
-    r[0] = (1 - 2 * (y * y + z * z)) * v[0] + 2 * (x * y - w * z) * v[1] + 2 * (x * z + w * y) * v[2]
-    r[1] = 2 * (x * y + w * z) * v[0] + (1 - 2 * (x * x + z * z)) * v[1] + 2 * (y * z - w * x) * v[2]
-    r[2] = 2 * (x * z - w * y) * v[0] + 2 * (y * z + w * x) * v[1] + (1 - 2 * (x * x + y * y)) * v[2]
-    return r
+    return ((1 - 2 * (y * y + z * z)) * v0 + 2 * (x * y - w * z) * v1 + 2 * (x * z + w * y) * v2,
+            2 * (x * y + w * z) * v0 + (1 - 2 * (x * x + z * z)) * v1 + 2 * (y * z - w * x) * v2,
+            2 * (x * z - w * y) * v0 + 2 * (y * z + w * x) * v1 + (1 - 2 * (x * x + y * y)) * v2)
 
 
 @numba.njit(cache=True)
@@ -175,8 +178,9 @@ def bond_forces(pos, quat, pt_a, pt_b, pt_ra, pt_rb, pt_na, pt_area, sigma_c, de
     Point p joins block a at body-frame offset pt_ra[p] and block b at pt_rb[p] (the two
     material points coincide in the bonded reference state); pt_na[p] is the face normal
     from a towards b in a's body frame; pt_area[p] its share of the face area [m²].
-    Opening d = x_b − x_a; δn = d·n, δt = |d − δn n|. Block a receives +A T, block b −A T,
-    both at the midpoint (x_a + x_b)/2. ``lam_max`` and ``broken`` are updated in place.
+    Opening d = x_b − x_a; δn = d·n, δt = |d − δn n|. Block a receives +A T at x_a, block b
+    −A T at x_b, and block a the torque of its normal's dependence on its rotation.
+    ``lam_max`` and ``broken`` are updated in place.
     Returns (stored energy [J], fracture dissipation so far [J]).
     """
     stored = 0.0
@@ -188,37 +192,48 @@ def bond_forces(pos, quat, pt_a, pt_b, pt_ra, pt_rb, pt_na, pt_area, sigma_c, de
             continue
         a = pt_a[p]
         b = pt_b[p]
-        arm_a = _rotate(quat[a], pt_ra[p])
-        arm_b = _rotate(quat[b], pt_rb[p])
-        n = _rotate(quat[a], pt_na[p])
-        d = pos[b] + arm_b - pos[a] - arm_a
-        dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2]
-        dtv = d - dn * n
-        dt = np.sqrt(dtv[0] ** 2 + dtv[1] ** 2 + dtv[2] ** 2)
+        ax, ay, az = _rotate(quat[a], pt_ra[p, 0], pt_ra[p, 1], pt_ra[p, 2])
+        bx, by, bz = _rotate(quat[b], pt_rb[p, 0], pt_rb[p, 1], pt_rb[p, 2])
+        nx, ny, nz = _rotate(quat[a], pt_na[p, 0], pt_na[p, 1], pt_na[p, 2])
+        dx = pos[b, 0] + bx - pos[a, 0] - ax
+        dy = pos[b, 1] + by - pos[a, 1] - ay
+        dz = pos[b, 2] + bz - pos[a, 2] - az
+        dn = dx * nx + dy * ny + dz * nz
+        tx, ty, tz = dx - dn * nx, dy - dn * ny, dz - dn * nz
+        dt = np.sqrt(tx * tx + ty * ty + tz * tz)
         tn, tt, st, di, lm, br = point_law(dn, dt, lam_max[p], sigma_c, delta_f, delta_tc,
                                            k_pen, damage)
         lam_max[p] = lm
         broken[p] = br
-        stored += st * pt_area[p]
-        dissipated += di * pt_area[p]
+        area = pt_area[p]
+        stored += st * area
+        dissipated += di * area
         if br:
             continue
-        f = tn * pt_area[p] * n
+        fx, fy, fz = tn * area * nx, tn * area * ny, tn * area * nz
+        # torque from the normal turning with block a: Φ depends on n through δn and δt,
+        # so a rotation of a costs energy; −n × ∂Φ/∂n = −A (Tn − Tt δn/δt) n × d
+        c = 0.0
         if dt > 0.0:
-            f += (tt * pt_area[p] / dt) * dtv
-        # both forces act at the midpoint of the two material points: the pair's moment
-        # about any point is then zero (angular momentum is conserved)
-        arm_a += 0.5 * d
-        arm_b -= 0.5 * d
-        for k in range(3):
-            force[a, k] += f[k]
-            force[b, k] -= f[k]
-        torque[a, 0] += arm_a[1] * f[2] - arm_a[2] * f[1]
-        torque[a, 1] += arm_a[2] * f[0] - arm_a[0] * f[2]
-        torque[a, 2] += arm_a[0] * f[1] - arm_a[1] * f[0]
-        torque[b, 0] -= arm_b[1] * f[2] - arm_b[2] * f[1]
-        torque[b, 1] -= arm_b[2] * f[0] - arm_b[0] * f[2]
-        torque[b, 2] -= arm_b[0] * f[1] - arm_b[1] * f[0]
+            s = tt * area / dt
+            fx += s * tx
+            fy += s * ty
+            fz += s * tz
+            c = area * (tn - tt * dn / dt)
+        # forces act at the material points x_a, x_b; with the n-torque above the bond is
+        # energy-consistent (F = −∂Φ/∂x) and moment-free (angular momentum conserved)
+        force[a, 0] += fx
+        force[a, 1] += fy
+        force[a, 2] += fz
+        force[b, 0] -= fx
+        force[b, 1] -= fy
+        force[b, 2] -= fz
+        torque[a, 0] += ay * fz - az * fy - c * (ny * dz - nz * dy)
+        torque[a, 1] += az * fx - ax * fz - c * (nz * dx - nx * dz)
+        torque[a, 2] += ax * fy - ay * fx - c * (nx * dy - ny * dx)
+        torque[b, 0] -= by * fz - bz * fy
+        torque[b, 1] -= bz * fx - bx * fz
+        torque[b, 2] -= bx * fy - by * fx
     return stored, dissipated
 
 
