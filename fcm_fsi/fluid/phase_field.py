@@ -315,13 +315,19 @@ class PhaseField:
         return l_err
 
     # --- checkpoint --------------------------------------------------------------
-    def state(self) -> dict[str, np.ndarray]:
-        return {"phi": self.phi.x.array.copy(), "phi_nm1": self.phi_nm1.x.array.copy(),
-                "scalars": np.array([self.volume0, self.mass0, float(self.steps_done), self.outflow_total])}
+    def state(self) -> tuple[dict, dict]:
+        """(owned nodal fields as (coords, values), replicated scalars) for a checkpoint."""
+        n = self.V.dofmap.index_map.size_local
+        x = self.V.tabulate_dof_coordinates()[:n]
+        fields = {"phi": (x, self.phi.x.array[:n].copy()), "phi_nm1": (x, self.phi_nm1.x.array[:n].copy())}
+        scalars = np.array([self.volume0, self.mass0, float(self.steps_done), self.outflow_total])
+        return fields, {"phase_field_scalars": scalars}
 
-    def load_state(self, state: dict[str, np.ndarray]) -> None:
-        self.phi.x.array[:] = state["phi"]
-        self.phi_n.x.array[:] = state["phi"]
-        self.phi_nm1.x.array[:] = state["phi_nm1"]
-        self.volume0, self.mass0, steps, self.outflow_total = state["scalars"]
+    def load_state(self, checkpoint) -> None:
+        from ..io.checkpoint import nodal_values_at
+        x = self.V.tabulate_dof_coordinates()
+        self.phi.x.array[:] = nodal_values_at(x, checkpoint.fields["phi"], "phi")
+        self.phi_n.x.array[:] = self.phi.x.array
+        self.phi_nm1.x.array[:] = nodal_values_at(x, checkpoint.fields["phi_nm1"], "phi_nm1")
+        self.volume0, self.mass0, steps, self.outflow_total = checkpoint.globals["phase_field_scalars"]
         self.steps_done = int(steps)

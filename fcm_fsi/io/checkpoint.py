@@ -1,8 +1,11 @@
 """HDF5 checkpoints (h5py, written by rank 0) and restart.
 
-Each rank's local arrays (owned + ghost values of its partition) are gathered to rank 0
-and stored as ``/<name>/rank_<r>``; restart scatters them back. A restart therefore
-needs the same number of ranks and the same case (its fingerprint is stored); anything
+Mesh fields are stored partition-independently: each rank's owned nodal values and their
+coordinates are gathered to rank 0 (``/fields/<name>/coords|values``); on restart every
+rank reads them and picks the values at its own (owned + ghost) nodes by nearest-point
+matching, which must be exact (the mesh partition may differ between runs). Replicated
+arrays (counters, DEM state) are written once (``/globals/<name>``). A restart needs the
+same case (its fingerprint is stored) and, by policy, the same number of ranks; anything
 else is refused with a message. The file is written to a temporary name and renamed,
 so a crash while writing leaves the previous checkpoint intact.
 """
@@ -35,38 +38,54 @@ class Checkpoint:
     step: int
     time: float
     dt: float
-    arrays: dict[str, np.ndarray]
+    fields: dict[str, tuple[np.ndarray, np.ndarray]]   # name → (coords, values), all nodes
+    globals: dict[str, np.ndarray]
+
+
+def nodal_values_at(coords: np.ndarray, stored: tuple[np.ndarray, np.ndarray], name: str) -> np.ndarray:
+    """Values of a stored nodal field at ``coords`` (exact node matching)."""
+    from scipy.spatial import cKDTree
+    ck_coords, ck_values = stored
+    dist, idx = cKDTree(ck_coords).query(coords)
+    scale = max(float(np.ptp(ck_coords, axis=0).max()), 1.0)
+    if dist.size and dist.max() > 1e-9 * scale:
+        raise ConfigError(f"checkpoint field '{name}' was written on a different mesh "
+                          f"(node mismatch {dist.max():.3g} m)")
+    return ck_values[idx]
 
 
 def write_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str, step: int, time: float, dt: float,
-                     arrays: dict[str, np.ndarray]) -> None:
-    """Collective: gather ``arrays`` to rank 0 and write them atomically to ``path``."""
-    gathered = {name: comm.gather(np.ascontiguousarray(a), root=0) for name, a in arrays.items()}
+                     fields: dict[str, tuple[np.ndarray, np.ndarray]], globals_: dict[str, np.ndarray]) -> None:
+    """Collective: gather owned nodal ``fields`` (coords, values) to rank 0 and write atomically."""
+    gathered = {name: (comm.gather(np.ascontiguousarray(c), root=0), comm.gather(np.ascontiguousarray(v), root=0))
+                for name, (c, v) in fields.items()}
     if comm.rank == 0:
         import h5py
         path = Path(path)
         tmp = path.with_suffix(".tmp.h5")
         with h5py.File(tmp, "w") as f:
             f.attrs.update({"step": step, "time": time, "dt": dt, "ranks": comm.size,
-                            "fingerprint": fingerprint, "format": "fcm_fsi-checkpoint-1"})
-            for name, parts in gathered.items():
-                g = f.create_group(name)
-                for r, a in enumerate(parts):
-                    g.create_dataset(f"rank_{r}", data=a)
+                            "fingerprint": fingerprint, "format": "fcm_fsi-checkpoint-2"})
+            for name, (cs, vs) in gathered.items():
+                g = f.create_group(f"fields/{name}")
+                g.create_dataset("coords", data=np.concatenate(cs))
+                g.create_dataset("values", data=np.concatenate(vs))
+            for name, a in globals_.items():
+                f.create_dataset(f"globals/{name}", data=a)
         os.replace(tmp, path)
     comm.barrier()
 
 
 def read_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str) -> Checkpoint:
     """Collective: read a checkpoint written by :func:`write_checkpoint`; refuse mismatches."""
-    error, meta, parts = None, None, None
+    error, payload = None, None
     if comm.rank == 0:
         import h5py
         path = Path(path)
         try:
             with h5py.File(path, "r") as f:
                 a = dict(f.attrs)
-                if a.get("format") != "fcm_fsi-checkpoint-1":
+                if a.get("format") != "fcm_fsi-checkpoint-2":
                     raise ConfigError(f"{path}: not an fcm_fsi checkpoint")
                 if int(a["ranks"]) != comm.size:
                     raise ConfigError(f"{path}: written by {int(a['ranks'])} rank(s), this run has {comm.size}; "
@@ -74,8 +93,9 @@ def read_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str) -> Checkpoint:
                 if a["fingerprint"] != fingerprint:
                     raise ConfigError(f"{path}: the case changed since this checkpoint was written "
                                       "(only run.t_end, cadences and output may change on restart)")
-                meta = (int(a["step"]), float(a["time"]), float(a["dt"]))
-                parts = {name: [f[name][f"rank_{r}"][...] for r in range(comm.size)] for name in f}
+                fields = {n: (g["coords"][...], g["values"][...]) for n, g in f.get("fields", {}).items()}
+                globals_ = {n: d[...] for n, d in f.get("globals", {}).items()}
+                payload = (int(a["step"]), float(a["time"]), float(a["dt"]), fields, globals_)
         except FileNotFoundError:
             error = f"{path}: checkpoint file not found"
         except OSError as err:
@@ -85,7 +105,5 @@ def read_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str) -> Checkpoint:
     error = comm.bcast(error, root=0)
     if error:
         raise ConfigError(error)
-    meta = comm.bcast(meta, root=0)
-    names = comm.bcast(list(parts) if parts else [], root=0)
-    arrays = {name: comm.scatter(parts[name] if comm.rank == 0 else None, root=0) for name in names}
-    return Checkpoint(meta[0], meta[1], meta[2], arrays)
+    step, time, dt, fields, globals_ = comm.bcast(payload, root=0)
+    return Checkpoint(step, time, dt, fields, globals_)

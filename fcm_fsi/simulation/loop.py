@@ -38,8 +38,8 @@ class Model(Protocol):
     def diagnostics(self) -> dict[str, float]: ...
     def health(self, diag: dict[str, float]) -> str | None: ...
     def stable_dt(self, cfl: float) -> float: ...
-    def state(self) -> dict[str, np.ndarray]: ...
-    def load_state(self, state: dict[str, np.ndarray]) -> None: ...
+    def state(self) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], dict[str, np.ndarray]]: ...
+    def load_state(self, checkpoint) -> None: ...
 
 
 def next_dt(case: Case, model: Model, t: float) -> float:
@@ -49,8 +49,10 @@ def next_dt(case: Case, model: Model, t: float) -> float:
     if run.cfl is not None:
         dt = min(run.dt_max or run.dt, model.stable_dt(run.cfl))
     remaining = run.t_end - t
-    if remaining < 1.5 * dt:  # land exactly on t_end without a sliver step
-        dt = remaining if remaining <= dt else 0.5 * remaining
+    if remaining <= dt * (1 + 1e-6):      # last step lands on t_end
+        return remaining
+    if remaining < 1.5 * dt:              # two equal steps instead of a sliver
+        return 0.5 * remaining
     return dt
 
 
@@ -72,7 +74,7 @@ class TimeLoop:
         self.step, self.t = 0, 0.0
         if restart:
             ck = read_checkpoint(Path(restart), comm, self.fingerprint)
-            model.load_state(ck.arrays)
+            model.load_state(ck)
             self.step, self.t = ck.step, ck.time
             log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)
         self.series = TimeSeriesCSV(self.out / "series.csv", {"step": "-", "t": "s", "dt": "s", **model.series_units},
@@ -85,8 +87,9 @@ class TimeLoop:
     def checkpoint(self, dt: float) -> None:
         if self.case.output.checkpoint:
             with self.timer("checkpoint"):
+                fields, globals_ = self.model.state()
                 write_checkpoint(self.out / "checkpoint.h5", self.comm, self.fingerprint, self.step, self.t,
-                                 dt, self.model.state())
+                                 dt, fields, globals_)
 
     def record(self, dt: float, diag: dict[str, float]) -> None:
         with self.timer("output"):

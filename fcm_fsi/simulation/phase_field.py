@@ -58,8 +58,8 @@ class PhaseFieldModel:
             problem = f"φ left [{PHI_BOUNDS[0]}, {PHI_BOUNDS[1]}]: min {diag['phi_min']:.3g}, max {diag['phi_max']:.3g}"
         return problem
 
-    def state(self) -> dict[str, np.ndarray]:
+    def state(self):
         return self.pf.state()
 
-    def load_state(self, state: dict[str, np.ndarray]) -> None:
-        self.pf.load_state(state)
+    def load_state(self, checkpoint) -> None:
+        self.pf.load_state(checkpoint)
