@@ -14,6 +14,7 @@ build beams and block pairs with it).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -56,6 +57,19 @@ class Structure:
         q = np.zeros((self.nb, 4))
         q[:, 0] = 1.0
         return q
+
+    def subset(self, keep) -> "Structure":
+        """The blocks where ``keep`` is true, renumbered; faces to dropped blocks vanish."""
+        keep = np.asarray(keep, bool)
+        new_id = np.cumsum(keep) - 1
+        sph = keep[self.sph_block]
+        faces = [dataclasses.replace(f, a=int(new_id[f.a]), b=int(new_id[f.b]))
+                 for f in self.faces if keep[f.a] and keep[f.b]]
+        return Structure(lo=self.lo[keep], hi=self.hi[keep], kind=self.kind[keep],
+                         storey=self.storey[keep], mass=self.mass[keep], inertia=self.inertia[keep],
+                         sph_block=new_id[self.sph_block[sph]], sph_local=self.sph_local[sph],
+                         sph_radius=self.sph_radius[sph], sph_material=self.sph_material[sph],
+                         faces=faces)
 
     def to_state(self, fixed=None):
         """A :class:`fcm_fsi.dem.state.DEMState` at rest in the built configuration."""

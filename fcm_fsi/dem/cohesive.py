@@ -162,9 +162,9 @@ def point_law_array(dn, dt, lam_max, broken, sigma_c, delta_f, delta_tc, k_pen, 
 
 
 @numba.njit(cache=True, inline="always")
-def _rotate(q, v0, v1, v2):
-    """R(q) v for a unit quaternion q = (w, x, y, z); returns the three components."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
+def _rotate(quat, i, v0, v1, v2):
+    """R(q) v for the unit quaternion q = quat[i] = (w, x, y, z); returns the components."""
+    w, x, y, z = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
     return ((1 - 2 * (y * y + z * z)) * v0 + 2 * (x * y - w * z) * v1 + 2 * (x * z + w * y) * v2,
             2 * (x * y + w * z) * v0 + (1 - 2 * (x * x + z * z)) * v1 + 2 * (y * z - w * x) * v2,
             2 * (x * z - w * y) * v0 + 2 * (y * z + w * x) * v1 + (1 - 2 * (x * x + y * y)) * v2)
@@ -192,9 +192,9 @@ def bond_forces(pos, quat, pt_a, pt_b, pt_ra, pt_rb, pt_na, pt_area, sigma_c, de
             continue
         a = pt_a[p]
         b = pt_b[p]
-        ax, ay, az = _rotate(quat[a], pt_ra[p, 0], pt_ra[p, 1], pt_ra[p, 2])
-        bx, by, bz = _rotate(quat[b], pt_rb[p, 0], pt_rb[p, 1], pt_rb[p, 2])
-        nx, ny, nz = _rotate(quat[a], pt_na[p, 0], pt_na[p, 1], pt_na[p, 2])
+        ax, ay, az = _rotate(quat, a, pt_ra[p, 0], pt_ra[p, 1], pt_ra[p, 2])
+        bx, by, bz = _rotate(quat, b, pt_rb[p, 0], pt_rb[p, 1], pt_rb[p, 2])
+        nx, ny, nz = _rotate(quat, a, pt_na[p, 0], pt_na[p, 1], pt_na[p, 2])
         dx = pos[b, 0] + bx - pos[a, 0] - ax
         dy = pos[b, 1] + by - pos[a, 1] - ay
         dz = pos[b, 2] + bz - pos[a, 2] - az
