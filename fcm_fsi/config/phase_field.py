@@ -54,6 +54,8 @@ class PhaseFieldConfig:
     volume_correction: bool = param(False, doc="shift the interface by L_err = V_err/A every step (eqs 16–17)")
     initial: InitialShape = param(doc="initial liquid region")
     velocity: PrescribedVelocity | None = param(None, doc="prescribed advecting velocity; omit when the fluid section provides it")
-    petsc: dict = param(default_factory=lambda: {"ksp_type": "preonly", "pc_type": "lu"},
-                        doc="PETSc options of the φ solve (prefix pf_)")
+    petsc: dict = param(default_factory=lambda: {"ksp_type": "gmres", "pc_type": "bjacobi", "sub_pc_type": "ilu",
+                                                 "ksp_rtol": 1e-12, "ksp_atol": 1e-15},
+                        doc="PETSc options of the φ solve (prefix pf_); the default GMRES + block-Jacobi/ILU "
+                            "suits the mass-dominated system; tight tolerances keep ∫φ conserved")
 

@@ -233,10 +233,7 @@ class PhaseField:
         self.ksp = PETSc.KSP().create(self.comm)
         self.ksp.setOptionsPrefix("pf_")
         opts = PETSc.Options()
-        defaults = {"ksp_rtol": 1e-12, "ksp_atol": 1e-14}
-        if self.comm.size > 1:
-            defaults["pc_factor_mat_solver_type"] = "mumps"
-        for k, v in {**defaults, **cfg.petsc}.items():
+        for k, v in cfg.petsc.items():
             opts[f"pf_{k}"] = v
         self.ksp.setFromOptions()
         self.ksp.setOperators(self.A)
