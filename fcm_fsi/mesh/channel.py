@@ -32,7 +32,9 @@ class TaggedMesh:
     names: dict[str, int]
 
 
-def _tag_planes(msh, lower, upper, names) -> TaggedMesh:
+def tag_box_boundaries(msh, lower, upper, names=("left", "right", "bottom", "top", "front", "back")) -> TaggedMesh:
+    """Tag the axis-aligned planes of a rectangle/box mesh: names in order x-lo, x-hi, y-lo, y-hi, z-lo, z-hi."""
+    names = tuple(names)[: 2 * len(lower)]
     fdim = msh.topology.dim - 1
     facets, values = [], []
     for tag, (axis, coord) in enumerate(((a, c) for a in range(len(lower)) for c in (lower[a], upper[a])), 1):
@@ -55,13 +57,13 @@ def rectangle(comm, lower=(0.0, 0.0), upper=(1.0, 1.0), n=(32, 32), diagonal: st
             "crossed": dmesh.DiagonalType.crossed}[diagonal]
     msh = dmesh.create_rectangle(comm, [np.array(lower), np.array(upper)], list(n),
                                  dmesh.CellType.triangle, diagonal=diag)
-    return _tag_planes(msh, lower, upper, ("left", "right", "bottom", "top"))
+    return tag_box_boundaries(msh, lower, upper, ("left", "right", "bottom", "top"))
 
 
 def box(comm, lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), n=(8, 8, 8)) -> TaggedMesh:
     """Structured tetrahedra with boundaries left, right, bottom, top, front, back (x, y, z pairs)."""
     msh = dmesh.create_box(comm, [np.array(lower), np.array(upper)], list(n), dmesh.CellType.tetrahedron)
-    return _tag_planes(msh, lower, upper, ("left", "right", "bottom", "top", "front", "back"))
+    return tag_box_boundaries(msh, lower, upper, ("left", "right", "bottom", "top", "front", "back"))
 
 
 def _classify_and_mesh(gmsh, dim: int, length: float, height: float, center, radius: float,

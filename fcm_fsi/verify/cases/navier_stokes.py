@@ -6,6 +6,7 @@ cylinder_2d1 / cylinder_2d2 / cylinder_3d1z: Schäfer & Turek (1996) channel ben
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -234,3 +235,72 @@ def cylinder_2d1(level, out_dir: Path, comm) -> list[Metric]:
             rel_error_metric("dp", dp, ST_2D1["dp"], 0.01),
             rel_error_metric("c_L", c_l, ST_2D1["c_L"], 0.10),
             report_only("cells", float(ncells), note="finest mesh")]
+
+
+# ------------------------------------------------------------ Schäfer–Turek 2D-2
+def cylinder_2d2_history(comm, h_cyl: float, h_far: float, dt: float, t_end: float):
+    """Re 100 (U_m = 1.5), Crank–Nicolson from rest with a 0.5 s inflow ramp.
+
+    The symmetric start is broken by spinning the cylinder for t < 1 s (surface speed up
+    to 0.3 m/s, then exactly 0); the periodic state is measured long after that.
+    Returns arrays t, c_D, c_L (forces at t^{n+1/2}).
+    """
+    tm = channel.channel_2d(comm, h_cyl=h_cyl, h_far=h_far)
+    cfg = dataclasses.replace(channel_config(1.5, 0.5, True), boundaries=(
+        BoundaryCondition(boundary="inlet", kind="parabolic_inflow", max_speed=1.5, ramp_time=0.5),
+        BoundaryCondition(boundary="walls", kind="no_slip"),
+        BoundaryCondition(boundary="outlet", kind="do_nothing")))
+
+    def spin(x, t):
+        omega = 6.0 * np.sin(np.pi * t) if t < 1.0 else 0.0
+        return np.vstack([-omega * (x[1] - 0.2), omega * (x[0] - 0.2)])
+    ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names,
+                      velocity_functions={"cylinder": spin})
+    force = ReactionForce(ns.W, ns.F_form, ns.boundary_facets("cylinder"))
+    ts, cd, cl = [], [], []
+    nsteps = int(round(t_end / dt))
+    for k in range(nsteps):
+        ns.step()
+        f = force()
+        ts.append(ns.t - 0.5 * dt)
+        cd.append(2 * f[0] / (1.0 * 1.0 ** 2 * 0.1))
+        cl.append(2 * f[1] / (1.0 * 1.0 ** 2 * 0.1))
+        if (k + 1) % 100 == 0:
+            log.info("2D-2 t = %.3f  c_D = %.4f  c_L = %.4f", ns.t, cd[-1], cl[-1])
+    return np.array(ts), np.array(cd), np.array(cl)
+
+
+def _strouhal(t: np.ndarray, cl: np.ndarray, diam: float = 0.1, u_mean: float = 1.0) -> float:
+    """St = D f / Ū from the mean period between upward zero crossings of c_L (linear interpolation)."""
+    c = cl - 0.5 * (cl.max() + cl.min())
+    idx = np.flatnonzero((c[:-1] < 0) & (c[1:] >= 0))
+    tz = t[idx] - c[idx] * (t[idx + 1] - t[idx]) / (c[idx + 1] - c[idx])
+    if len(tz) < 2:
+        return float("nan")
+    return diam / (np.diff(tz).mean() * u_mean)
+
+
+@register("cylinder_2d2", "Schäfer–Turek 2D-2 (Re 100, periodic): Strouhal number, max drag and lift", issue=3)
+def cylinder_2d2(level, out_dir: Path, comm) -> list[Metric]:
+    h_cyl, h_far, dt, t_end = (0.005, 0.02, 0.01, 4.5) if level == "quick" else (0.0035, 0.014, 0.005, 6.0)
+    t0 = time.perf_counter()
+    t, cd, cl = cylinder_2d2_history(comm, h_cyl, h_far, dt, t_end)
+    wall = time.perf_counter() - t0
+    window = t >= t_end - 1.5            # last ~4.5 periods
+    st = _strouhal(t[window], cl[window])
+    cd_max, cl_max = float(cd[window].max()), float(cl[window].max())
+    if comm.rank == 0:
+        plt = _plt()
+        fig, ax = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+        ax[0].plot(t, cd), ax[0].axhline(ST_2D2["c_D_max"], color="k", ls="--", label="S–T c_D,max 3.22–3.24")
+        ax[0].set_ylim(3.0, 3.4), ax[0].set_ylabel("c_D"), ax[0].legend(fontsize=8)
+        ax[1].plot(t, cl), ax[1].axhline(ST_2D2["c_L_max"], color="k", ls="--", label="S–T c_L,max 0.99–1.01")
+        ax[1].set_ylabel("c_L"), ax[1].set_xlabel("t (s)"), ax[1].legend(fontsize=8)
+        fig.suptitle(f"2D-2: St = {st:.4f}, c_D,max = {cd_max:.4f}, c_L,max = {cl_max:.4f} (h_cyl {h_cyl}, dt {dt})")
+        fig.tight_layout()
+        fig.savefig(out_dir / "cylinder_2d2_forces.png", dpi=110)
+        plt.close(fig)
+    return [in_interval("strouhal", st, *ST_2D2["strouhal"]),
+            rel_error_metric("c_D_max", cd_max, ST_2D2["c_D_max"], 0.01),
+            rel_error_metric("c_L_max", cl_max, ST_2D2["c_L_max"], 0.03),
+            report_only("wall_seconds", wall, unit="s", note=f"h_cyl {h_cyl}, dt {dt}, t_end {t_end}")]
