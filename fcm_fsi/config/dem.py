@@ -90,6 +90,7 @@ class WallConfig:
     open_top: bool = param(False, doc="box without its upper (+z) face")
     vertices: tuple[Vec3, ...] = param((), unit="m", doc="mesh vertices (kind mesh)")
     triangles: tuple[tuple[int, int, int], ...] = param((), doc="mesh triangles as vertex indices (kind mesh)", ge=0)
+    remove_at: float | None = param(None, unit="s", doc="the wall disappears at this time (a gate); null = never", ge=0)
 
     def __post_init__(self) -> None:
         if self.kind == "plane" and sum(a * a for a in self.normal) == 0:

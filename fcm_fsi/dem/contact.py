@@ -22,8 +22,10 @@ eq 20's e (e = 0.5 → 0.55; see ``restitution_clipped``). Without clipping eq 2
 exact for the linear model. Mixing of two materials: k = 2 k_1 k_2/(k_1 + k_2),
 k_t likewise, h = (h_1 + h_2)/2, μ = min(μ_1, μ_2).
 
-Ledger: stored energy ½kδ² + ½k_t|u_t|²; dashpot loss (F_N − kδ) v_n Δt + c_t|v_t|² Δt
-and slider loss μ F_N |Δu_t| per step, both with the step's velocities (n − 1/2).
+Ledger: stored energy ½kδ² + ½k_t|u_t|²; dashpot and slider losses are the work of those
+forces over each step by the trapezoid rule, Δt v_{n−1/2}·(F_{n−1} + F_n)/2 — the same
+quadrature that makes the leapfrog kinetic energy ½ m v_{n−1/2}·v_{n+1/2} exact — so what the
+balance shows is the integration error of the springs (contact opening/closing, rotation).
 """
 from __future__ import annotations
 
@@ -104,6 +106,7 @@ def _law(delta, nx, ny, nz, ux, uy, uz, hist, k, kt, c, ct, mu, clip, dt):
             hx *= s
             hy *= s
             hz *= s
+    ox, oy, oz = hx, hy, hz      # u_{n−1} on the current tangent plane
     hx += sx * dt
     hy += sy * dt
     hz += sz * dt
@@ -123,7 +126,9 @@ def _law(delta, nx, ny, nz, ux, uy, uz, hist, k, kt, c, ct, mu, clip, dt):
         nhx = -fx / kt
         nhy = -fy / kt
         nhz = -fz / kt
-        d_fric = fmax * math.sqrt((hx - nhx) ** 2 + (hy - nhy) ** 2 + (hz - nhz) ** 2)
+        # slider work over the step with the trapezoid rule (the quadrature of the ledger's
+        # kinetic energy): ½ k_t (u_trial − u_n)·(u_{n−1} + u_n)
+        d_fric = 0.5 * kt * ((hx - nhx) * (ox + nhx) + (hy - nhy) * (oy + nhy) + (hz - nhz) * (oz + nhz))
         hx, hy, hz = nhx, nhy, nhz
     else:
         gx = -ct * tx
@@ -306,11 +311,12 @@ def closest_point_triangle(px, py, pz, a, b, c):
 
 @nb.njit(cache=True, parallel=True)
 def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omega, mass, fixed,
-                planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, hist,
+                planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, hist,
                 mat_k, mat_kt, mat_h, mat_mu, clip, dt, force, torque):
     """Sphere–wall contact: half-spaces ``planes`` (n_x, n_y, n_z, d) with the unit normal n
     pointing into the domain (spheres live where n·x ≥ d) and triangle meshes (one
-    contact per sphere and mesh: the nearest triangle). History ``hist`` is (ns, nplanes +
+    contact per sphere and mesh: the nearest triangle); walls with ``active[w]`` False are
+    skipped (their contacts released). History ``hist`` is (ns, nplanes +
     nmesh, 3). Adds into force/torque; returns (spring energy, dashpot loss, slider loss)."""
     npl = planes.shape[0]
     e_s = 0.0
@@ -323,7 +329,11 @@ def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omeg
             r = sph_radius[s]
             px, py, pz = sph_pos[s, 0], sph_pos[s, 1], sph_pos[s, 2]
             for w in range(npl + nmesh):
-                if w < npl:
+                if not active[w]:
+                    delta = -1.0
+                    nx, ny, nz = 0.0, 0.0, 1.0
+                    wm = 0
+                elif w < npl:
                     gap = planes[w, 0] * px + planes[w, 1] * py + planes[w, 2] * pz - planes[w, 3]
                     delta = r - gap
                     nx, ny, nz = -planes[w, 0], -planes[w, 1], -planes[w, 2]
@@ -422,14 +432,15 @@ def pair_forces_ref(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, p
     hp = hh - np.sum(hh * n, axis=1)[:, None] * n
     p2 = np.sum(hp * hp, axis=1)
     scale = np.where((h2 > 0) & (p2 > 0), np.sqrt(h2 / np.where(p2 > 0, p2, 1)), 1.0)
-    hh = np.where((h2 > 0)[:, None], hp * scale[:, None], hh) + ut * dt
+    hold = np.where((h2 > 0)[:, None], hp * scale[:, None], hh)
+    hh = hold + ut * dt
     ft = -kt[:, None] * hh - ct[:, None] * vt
     ftn = np.linalg.norm(ft, axis=1)
     fmax = mu * FN
     slip = ftn > fmax
     ft_s = ft * np.where(ftn > 0, fmax / np.where(ftn > 0, ftn, 1), 0)[:, None]
     h_s = -ft_s / kt[:, None]
-    d_fric = np.where(slip, fmax * np.linalg.norm(hh - h_s, axis=1), 0.0)
+    d_fric = np.where(slip, 0.5 * kt * np.sum((hh - h_s) * (hold + h_s), axis=1), 0.0)
     g = np.where(slip[:, None], 0.0, -ct[:, None] * vt)
     d_dash = d_dash - 0.5 * np.sum((g + hist[:, 4:7]) * ut, axis=1) * dt
     ft = np.where(slip[:, None], ft_s, ft)
@@ -524,7 +535,7 @@ class WallContact:
     name = "walls"
 
     def __init__(self, materials: Materials, planes, plane_mat, tris, tri_mesh, mesh_mat, ns,
-                 clip_normal: bool = True):
+                 clip_normal: bool = True, until=None):
         self.mat = materials
         self.clip = bool(clip_normal)
         self.planes = np.asarray(planes, np.float64).reshape(-1, 4)
@@ -533,6 +544,8 @@ class WallContact:
         self.tri_mesh = np.asarray(tri_mesh, np.int64).reshape(-1)
         self.mesh_mat = np.asarray(mesh_mat, np.int64).reshape(-1)
         self.hist = np.zeros((ns, len(self.planes) + len(self.mesh_mat), HIST))
+        nw = self.hist.shape[1]
+        self.until = np.full(nw, np.inf) if until is None else np.asarray(until, np.float64).reshape(nw)
 
     def add_forces(self, state, force, torque, ledger, dt):
         if self.hist.shape[1] == 0:
@@ -541,7 +554,7 @@ class WallContact:
         es, dd, df = wall_forces(state.blk_sph_start, state.sph_pos, state.sph_radius, state.sph_material,
                                  state.pos, state.vel, state.omega, state.mass, state.fixed,
                                  self.planes, self.plane_mat, self.tris, self.tri_mesh, self.mesh_mat,
-                                 len(self.mesh_mat), self.hist, m.k, m.kt, m.h, m.mu, self.clip, dt,
+                                 len(self.mesh_mat), self.until > state.t, self.hist, m.k, m.kt, m.h, m.mu, self.clip, dt,
                                  force, torque)
         ledger[L_SPRING] += es
         ledger[L_DASHPOT] += dd

@@ -6,7 +6,7 @@ Evaluated at step n (after the kick, before the drift), in J:
 - ``kinetic_trans`` Σ ½ m v_{n−1/2}·v_{n+1/2} — the leapfrog's own kinetic energy: with it,
   free flight and a linear spring conserve the ledger exactly, so what remains in the
   balance is the error of contacts opening/closing and of the rotation splitting
-- ``kinetic_rot`` Σ ¼ (L_{n−1/2}·ω_{n−1/2} + L_{n+1/2}·ω_{n+1/2})
+- ``kinetic_rot`` Σ ½ L_{n−1/2}·I_w(q_n)⁻¹ L_{n+1/2}, the rotational analogue
 - ``spring``      stored elastic energy of contact springs and cohesive bonds (interactions)
 - ``dashpot_loss``, ``friction_loss``, ``bond_loss``  accumulated dissipation (interactions)
 - ``work_external``  Σ_n Δt [F_ext·(v₋+v₊)/2 + T_ext·(ω₋+ω₊)/2]
@@ -39,14 +39,15 @@ class Ledger:
         self.last: dict[str, float] = {}
 
     def update(self, state, gravity, led, vm, vp, Lm, Lp, wm, wp, F_ctrl, T_ctrl, dt) -> dict:
-        """One step's bookkeeping; vm/vp, Lm/Lp, wm/wp are the n∓1/2 velocities."""
+        """One step's bookkeeping; vm/vp, Lm/Lp are the n∓1/2 velocities and angular momenta,
+        wm/wp = I_w(q_n)⁻¹ Lm/Lp."""
         free = ~state.fixed
         m = state.mass[free]
         vbar = 0.5 * (vm + vp)[free]
         wbar = 0.5 * (wm + wp)[free]
         pot = -float(np.sum(m * (state.pos[free] @ np.asarray(gravity))))
         kt = float(0.5 * np.sum(m * np.sum(vm[free] * vp[free], axis=1)))
-        kr = float(0.25 * (np.sum(Lm[free] * wm[free]) + np.sum(Lp[free] * wp[free])))
+        kr = float(0.5 * np.sum(Lm[free] * wp[free]))
         a = self.acc
         a["dashpot_loss"] += float(led[L_DASHPOT])
         a["friction_loss"] += float(led[L_FRICTION])

@@ -65,12 +65,12 @@ def build_state(cfg: DEMConfig) -> DEMState:
     pos, quat, mass, inertia, vel, omega, fixed = [], [], [], [], [], [], []
     sb, sl, sr, sm = [], [], [], []
 
-    def add(tmpl: BlockTemplate, b: BlockConfig, p, q_user):
+    def add(tmpl: BlockTemplate, b: BlockConfig, p, q_user, p_is_com: bool = False):
         k = len(pos)
         # principal frame → user frame is R_body; world = q_user ∘ R_body
         q = _qmul(q_user, matrix_to_quat(tmpl.R_body))
         origin_shift = tmpl.R_body @ np.zeros(3)
-        if b.shape == "clump":   # clump spheres are given relative to `position`: move to the com
+        if b.shape == "clump" and not p_is_com:   # spheres given relative to `position`: move to the com
             s = np.asarray(b.spheres)[:, :3]
             ms = s[:, 0] * 0 + np.asarray(b.spheres)[:, 3] ** 3
             origin_shift = (ms[:, None] * s).sum(0) / ms.sum()
@@ -94,14 +94,16 @@ def build_state(cfg: DEMConfig) -> DEMState:
         tmpl = template_of(g.block, dens)
         P, Q = _generated(g, tmpl)
         for p, q in zip(P, Q):
-            add(tmpl, g.block, p, q)
+            add(tmpl, g.block, p, q, p_is_com=True)
     return DEMState.from_blocks(pos, quat, mass, inertia, sb, sl, sr, sm, vel=vel, omega=omega, fixed=fixed)
 
 
 def walls_of(cfg: DEMConfig, mats: Materials, ns: int, clip: bool) -> WallContact | None:
-    planes, pmat, tris, tmesh, mmat = [], [], [], [], []
+    planes, pmat, tris, tmesh, mmat, puntil, muntil = [], [], [], [], [], [], []
     for w in cfg.walls:
         mi = cfg.material_index(w.material)
+        until = math.inf if w.remove_at is None else w.remove_at
+        n_pl = len(planes)
         if w.kind == "plane":
             n = np.asarray(w.normal, np.float64)
             n /= np.linalg.norm(n)
@@ -125,9 +127,12 @@ def walls_of(cfg: DEMConfig, mats: Materials, ns: int, clip: bool) -> WallContac
                 tris.append(V[list(t)])
                 tmesh.append(len(mmat))
             mmat.append(mi)
+            muntil.append(until)
+        puntil.extend([until] * (len(planes) - n_pl))
     if not planes and not tris:
         return None
-    return WallContact(mats, np.reshape(planes, (-1, 4)), pmat, np.reshape(tris, (-1, 3, 3)), tmesh, mmat, ns, clip)
+    return WallContact(mats, np.reshape(planes, (-1, 4)), pmat, np.reshape(tris, (-1, 3, 3)), tmesh, mmat, ns, clip,
+                       until=puntil + muntil)
 
 
 def build_system(cfg: DEMConfig, with_ledger: bool = True) -> DEMSystem:

@@ -58,9 +58,9 @@ class DEMSystem:
         self.led = np.zeros(LEDGER_SLOTS)
         self.interaction_force = np.zeros((state.nb, 3))
         self._w = np.zeros((state.nb, 3))
+        self._wm = np.zeros((state.nb, 3))
         self.vel_prev = state.vel.copy()        # v_{n−1/2} kept for the ledger
         self.angmom_prev = state.angmom.copy()
-        self.omega_prev = state.omega.copy()
 
     # ------------------------------------------------------------------ stages
     def compute_forces(self) -> None:
@@ -84,13 +84,14 @@ class DEMSystem:
         if self.ledger is not None:
             self.vel_prev[:] = st.vel
             self.angmom_prev[:] = st.angmom
-            self.omega_prev[:] = st.omega
-            vm, Lm, wm = self.vel_prev, self.angmom_prev, self.omega_prev
+            vm, Lm = self.vel_prev, self.angmom_prev
         kick(st.vel, st.angmom, st.mass, self.force, self.torque, st.fixed, dt)
         if self.controls is not None:
             self.controls.enforce(st, dt)
         if self.ledger is not None:
-            omega_from_angmom(st.quat, st.angmom, st.inertia, self._w)
+            omega_from_angmom(st.quat, st.angmom, st.inertia, self._w)      # I(q_n)⁻¹ L_{n+1/2}
+            omega_from_angmom(st.quat, Lm, st.inertia, self._wm)             # I(q_n)⁻¹ L_{n−1/2}
+            wm = self._wm
             Fc = self.controls.F if self.controls is not None else self._zero()
             Tc = self.controls.T if self.controls is not None else self._zero()
             self.ledger.update(st, self.gravity, self.led, vm, st.vel, Lm, st.angmom, wm, self._w, Fc, Tc, dt)

@@ -369,3 +369,98 @@ def chain_wave(level, out_dir: Path, comm) -> list:
         ax.legend(fontsize=8)
     _plot(out_dir, "chain_wave.png", comm, draw)
     return metrics
+
+
+# ------------------------------------------------------------------------- repose
+R_CLUMP = 0.005
+
+
+def repose_config(count: int, seed: int, dt: float = 2.5e-5, t_gate: float = 0.4, half_width: float = 0.1) -> dict:
+    """Three-sphere clumps (r = 5 mm) settle in a 40 mm wide slot between two gates at
+    x = ±half_width; the gates are removed at t_gate and the granular "dam" collapses
+    into a heap whose flanks stand at the angle of repose (the same set-up as
+    cases/dem_repose.yaml). Aspect ratio height/width < 0.7 keeps the flanks at repose."""
+    r = R_CLUMP
+    a = 2.0 * 1.69 * r * 1.05                       # lattice spacing of the generator
+    per_layer = int((2 * half_width - 2 * 1.69 * r) / a + 1) * 2
+    height = 0.0 + (count // per_layer + 2) * a
+    plane = (lambda p, n, until=None: {"kind": "plane", "material": "grain", "point": p, "normal": n,
+                                       "remove_at": until})
+    return {"dt": dt, "gravity": [0, 0, -9.81],
+            "materials": [{"name": "grain", "stiffness": 1e5, "restitution": 0.3, "friction_angle": 30.0,
+                           "density": 2500.0}],
+            "generators": [{"block": {"shape": "clump", "material": "grain", "position": [0, 0, 0],
+                                      "spheres": [[0, 0, 0, r], [1.2 * r, 0, 0, r], [0.6 * r, 1.0 * r, 0, r]]},
+                            "count": count, "region_min": [-half_width, 0.0, 0.0],
+                            "region_max": [half_width, 0.04, height], "seed": seed}],
+            "walls": [plane([0, 0, 0], [0, 0, 1]), plane([0, 0, 0], [0, 1, 0]), plane([0, 0.04, 0], [0, -1, 0]),
+                      plane([-half_width, 0, 0], [1, 0, 0], t_gate), plane([half_width, 0, 0], [-1, 0, 0], t_gate),
+                      plane([-0.6, 0, 0], [1, 0, 0]), plane([0.6, 0, 0], [-1, 0, 0])]}
+
+
+def heap_angle(sph_pos, sph_radius, bin_width: float = 2 * R_CLUMP):
+    """Angle of repose [deg] of a quasi-2D heap: the surface z_s(x) (top of the highest sphere
+    per x bin) is fitted by a line on each flank between 20 % and 80 % of the peak height."""
+    top = sph_pos[:, 2] + sph_radius
+    x = sph_pos[:, 0]
+    edges = np.arange(x.min() - bin_width, x.max() + 2 * bin_width, bin_width)
+    idx = np.digitize(x, edges)
+    xc, zs = [], []
+    for k in np.unique(idx):
+        sel = idx == k
+        xc.append(0.5 * (edges[k - 1] + edges[k]))
+        zs.append(top[sel].max())
+    xc, zs = np.array(xc), np.array(zs)
+    h = zs.max()
+    ipk = int(np.argmax(zs))
+    fits = []
+    for side in (slice(0, ipk + 1), slice(ipk, len(xc))):
+        xs, z = xc[side], zs[side]
+        sel = (z > 0.2 * h) & (z < 0.8 * h)
+        if np.count_nonzero(sel) >= 3:
+            fits.append(np.polyfit(xs[sel], z[sel], 1))
+    angles = [math.degrees(math.atan(abs(f[0]))) for f in fits]
+    return (float(np.mean(angles)) if angles else float("nan")), xc, zs, fits
+
+
+def _pour(count, seed, t_end, dt=2.5e-5):
+    s = build_system(_cfg(repose_config(count, seed, dt)), with_ledger=False)
+    s.run(int(round(t_end / dt)))
+    return s
+
+
+@register("repose", "granular dam break of three-sphere clumps: angle of repose, deterministic for a seed", issue=6)
+def repose(level, out_dir: Path, comm) -> list:
+    count, t_end = (150, 1.2) if level == "quick" else (600, 2.0)
+    t0 = time.perf_counter()
+    s = _pour(count, 7, t_end)
+    wall = time.perf_counter() - t0
+    st = s.state
+    ang, xc, zs, fits = heap_angle(st.sph_pos, st.sph_radius)
+    vmax = float(np.abs(st.vel).max())
+    # determinism: the same seed again (short run) must give identical positions, bit for bit
+    a = _pour(count, 7, 0.05)
+    b = _pour(count, 7, 0.05)
+    diff = float(np.abs(a.state.pos - b.state.pos).max())
+    metrics = [in_interval("repose_angle", ang, 10.0, 60.0, unit="deg"),
+               at_most("repeat_max_position_difference", diff, 0.0, unit="m"),
+               report_only("max_speed_at_end", vmax, unit="m/s", note="heap at rest if ≪ 0.01"),
+               report_only("wall_time", wall, unit="s", note=f"{count} clumps, {st.ns} spheres, {t_end} s")]
+
+    def draw(fig):
+        ax = fig.add_subplot(1, 1, 1)
+        ax.scatter(st.sph_pos[:, 0], st.sph_pos[:, 2], s=3, c=st.sph_block % 7, cmap="tab10")
+        ax.step(xc, zs, where="mid", color="k", lw=0.8, label="surface (top of highest sphere)")
+        for f in fits:
+            xx = np.linspace(xc.min(), xc.max(), 10)
+            zz = np.polyval(f, xx)
+            ok = (zz > 0) & (zz < zs.max())
+            ax.plot(xx[ok], zz[ok], "r--", lw=1)
+        ax.plot([], [], "r--", label=f"fits: angle of repose {ang:.1f}°")
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("z [m]")
+        ax.legend(fontsize=8)
+        ax.set_title(f"{count} clumps, seed 7, t = {t_end} s")
+    _plot(out_dir, "repose.png", comm, draw)
+    return metrics
