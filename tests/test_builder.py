@@ -145,3 +145,15 @@ def test_assemble_pair_shares_one_face():
     assert len(s.faces) == 1
     f = s.faces[0]
     assert (f.a, f.b) == (0, 1) and f.normal == (1.0, 0.0, 0.0) and f.area == pytest.approx(1.0)
+
+
+def test_docs_list_every_schema_field():
+    """docs/cohesive.md carries the field tables of the three schema classes."""
+    import dataclasses
+    from fcm_fsi.config.structure import OpeningConfig
+    text = (PAPER.parents[1] / "docs" / "cohesive.md").read_text()
+    for cls, prefix in ((CohesiveConfig, "dem.cohesive"), (StructureConfig, "dem.structure"),
+                        (OpeningConfig, "dem.structure.openings[]")):
+        assert f"| key `{prefix}.…` |" in text
+        for f in dataclasses.fields(cls):
+            assert f"| `{f.name}` |" in text and f.metadata["doc"] in text, f.name

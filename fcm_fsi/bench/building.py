@@ -114,9 +114,14 @@ def run(argv: list[str]) -> int:
     for n in range(1, nsteps):
         system.step()
         if n % max(1, nsteps // 10) == 0:
-            log.info("t = %.3f s: %d bonds broken, lowest block centre z = %.2f m, wall %.1f s",
-                     state.t, int(bonds.broken_bonds().sum()), state.pos[:, 2].min(),
-                     time.perf_counter() - t0)
+            led = system.ledger.last
+            log.info("t = %.3f s: %d bonds broken, lowest block centre z = %.2f m, kinetic %.4g J, "
+                     "bond stored %.4g J, bond loss %.4g J, contact spring+dashpot+friction "
+                     "%.4g J, balance error %.4g J, wall %.1f s", state.t,
+                     int(bonds.broken_bonds().sum()), state.pos[:, 2].min(),
+                     led["kinetic_trans"] + led["kinetic_rot"], bonds.stored, led["bond_loss"],
+                     led["spring"] - bonds.stored + led["dashpot_loss"] + led["friction_loss"],
+                     led["balance_error"], time.perf_counter() - t0)
     wall = time.perf_counter() - t0
     steps = nsteps - 1
     led = system.ledger.last

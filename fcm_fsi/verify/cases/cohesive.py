@@ -138,7 +138,7 @@ def run_pull(level, out_dir: Path, comm) -> list:
             ax.set_xlabel("opening δ/δ_f")
             ax.set_ylabel("F/(A σ_c)")
             ax.set_title(f"cohesive_pull: peak err {peak_err:.1e}, work err {work_err:.1e}")
-            ax.legend(fontsize=8)
+            ax.legend(fontsize=8, loc="upper right")
             return fig
         _plot(out_dir / "cohesive_pull.png", draw)
     return metrics
