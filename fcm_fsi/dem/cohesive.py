@@ -34,6 +34,7 @@ import numba
 import numpy as np
 
 from . import L_BOND, L_BOND_LOSS
+from .bodies import rotate
 
 MODES = {"reversible": 0, "damage": 1}
 
@@ -161,15 +162,6 @@ def point_law_array(dn, dt, lam_max, broken, sigma_c, delta_f, delta_tc, k_pen, 
     return tn, tt, st, di, lm, br
 
 
-@numba.njit(cache=True, inline="always")
-def _rotate(quat, i, v0, v1, v2):
-    """R(q) v for the unit quaternion q = quat[i] = (w, x, y, z); returns the components."""
-    w, x, y, z = quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3]
-    return ((1 - 2 * (y * y + z * z)) * v0 + 2 * (x * y - w * z) * v1 + 2 * (x * z + w * y) * v2,
-            2 * (x * y + w * z) * v0 + (1 - 2 * (x * x + z * z)) * v1 + 2 * (y * z - w * x) * v2,
-            2 * (x * z - w * y) * v0 + 2 * (y * z + w * x) * v1 + (1 - 2 * (x * x + y * y)) * v2)
-
-
 @numba.njit(cache=True)
 def bond_forces(pos, quat, pt_a, pt_b, pt_ra, pt_rb, pt_na, pt_area, sigma_c, delta_f,
                 delta_tc, k_pen, damage, lam_max, broken, force, torque):
@@ -192,9 +184,11 @@ def bond_forces(pos, quat, pt_a, pt_b, pt_ra, pt_rb, pt_na, pt_area, sigma_c, de
             continue
         a = pt_a[p]
         b = pt_b[p]
-        ax, ay, az = _rotate(quat, a, pt_ra[p, 0], pt_ra[p, 1], pt_ra[p, 2])
-        bx, by, bz = _rotate(quat, b, pt_rb[p, 0], pt_rb[p, 1], pt_rb[p, 2])
-        nx, ny, nz = _rotate(quat, a, pt_na[p, 0], pt_na[p, 1], pt_na[p, 2])
+        qa0, qa1, qa2, qa3 = quat[a, 0], quat[a, 1], quat[a, 2], quat[a, 3]
+        qb0, qb1, qb2, qb3 = quat[b, 0], quat[b, 1], quat[b, 2], quat[b, 3]
+        ax, ay, az = rotate(qa0, qa1, qa2, qa3, pt_ra[p, 0], pt_ra[p, 1], pt_ra[p, 2])
+        bx, by, bz = rotate(qb0, qb1, qb2, qb3, pt_rb[p, 0], pt_rb[p, 1], pt_rb[p, 2])
+        nx, ny, nz = rotate(qa0, qa1, qa2, qa3, pt_na[p, 0], pt_na[p, 1], pt_na[p, 2])
         dx = pos[b, 0] + bx - pos[a, 0] - ax
         dy = pos[b, 1] + by - pos[a, 1] - ay
         dz = pos[b, 2] + bz - pos[a, 2] - az

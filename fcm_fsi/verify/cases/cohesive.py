@@ -12,6 +12,7 @@ import numba
 import numpy as np
 
 from ...dem import L_SPRING
+from ...dem.bodies import rotate
 from ...dem.builder import assemble
 from ...dem.cohesive import CohesiveLaw, shape_g
 from ...dem.state import quat_to_matrix_np
@@ -216,29 +217,20 @@ def point_spring_forces(pos, quat, a, b, ra, rb, e, k, unilateral, force, torque
     ``unilateral`` (a contact that can push but not pull); returns stored energy [J]."""
     energy = 0.0
     for s in range(a.shape[0]):
-        xa = pos[a[s]] + quat_to_matrix(quat[a[s]]) @ ra[s]
-        xb = pos[b[s]] + quat_to_matrix(quat[b[s]]) @ rb[s]
-        ext = (xb[0] - xa[0]) * e[s, 0] + (xb[1] - xa[1]) * e[s, 1] + (xb[2] - xa[2]) * e[s, 2]
+        i, j = a[s], b[s]
+        arm_a = np.array(rotate(quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3], ra[s, 0], ra[s, 1], ra[s, 2]))
+        arm_b = np.array(rotate(quat[j, 0], quat[j, 1], quat[j, 2], quat[j, 3], rb[s, 0], rb[s, 1], rb[s, 2]))
+        ext = np.sum((pos[j] + arm_b - pos[i] - arm_a) * e[s])
         if unilateral[s] and ext < 0.0:
             ext = 0.0
         tension[s] = k[s] * ext
         energy += 0.5 * k[s] * ext * ext
         f = tension[s] * e[s]
-        arm_a = xa - pos[a[s]]
-        arm_b = xb - pos[b[s]]
-        force[a[s]] += f
-        force[b[s]] -= f
-        torque[a[s]] += np.cross(arm_a, f)
-        torque[b[s]] -= np.cross(arm_b, f)
+        force[i] += f
+        force[j] -= f
+        torque[i] += np.cross(arm_a, f)
+        torque[j] -= np.cross(arm_b, f)
     return energy
-
-
-@numba.njit(cache=True)
-def quat_to_matrix(q):
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 class PointSprings:
@@ -345,7 +337,7 @@ def three_point_bending(n_blocks: int, ell: float, b: float, h: float, mode: str
         return v_slow * ramp(t, 0.0, 2 * period) + (v_fast - v_slow) * ramp(t, t_slow, 2 * period)
 
     def z_of(blk, x):  # world z of the material point of block blk that started at x
-        return (state.pos[blk] + quat_to_matrix(state.quat[blk]) @ (x - pos[blk]))[2]
+        return (state.pos[blk] + quat_to_matrix_np(state.quat[blk]) @ (x - pos[blk]))[2]
 
     rec = {k: [] for k in ("t", "P", "w", "W", "bal")}
     first_crack = None  # x of the face where a point first passes the peak (λ > 1/3)
