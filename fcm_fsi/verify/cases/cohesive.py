@@ -61,23 +61,25 @@ def _plot(path: Path, draw) -> None:
 PULL_PATH = (0.5, 0.2, 0.5, 1.05)  # δ/δ_f targets: load, unload, reload, separate
 
 
-def pull_apart(mode: str, steps_per_df: int, dt: float = 1.0e-5):
+def pull_apart(mode: str, steps_per_df: int, dt: float = 1.0e-5, delta_tc: float | None = None):
     """Two 1 × 0.4 × 0.4 m blocks bonded on a 0.16 m² face, turned to an arbitrary attitude;
-    block a fixed, block b velocity-controlled along the face normal through PULL_PATH.
-    Returns (δ [m], F [N] pulling force on b, area [m²])."""
+    block a fixed, block b velocity-controlled through PULL_PATH along the face normal or,
+    when ``delta_tc`` is given, along the face (pure shear, targets in units of δ_tc).
+    Returns (δ [m], F [N] force on b along the path, area [m²])."""
     from ...dem.control import Control, Controls
     s = assemble([[0, 0, 0], [1, 0, 0]], [[1, .4, .4], [2, .4, .4]], density=DENSITY,
                  sphere_radius=0.1)
-    bonds = s.bonds(_law(mode), points_per_edge=2)
+    bonds = s.bonds(_law(mode) if delta_tc is None else _law(mode, delta_tc), points_per_edge=2)
     state = s.to_state(fixed=[True, False])
     q = np.array([0.9, 0.2, -0.3, 0.25])
     q /= np.linalg.norm(q)
     _rotate_rigidly(state, q)
-    normal = quat_to_matrix_np(q) @ np.array([1.0, 0.0, 0.0])
+    normal = quat_to_matrix_np(q) @ np.array([1.0, 0.0, 0.0] if delta_tc is None else [0.0, 1.0, 0.0])
+    scale = DELTA_F if delta_tc is None else delta_tc
     ctrl = Control(block=1, modes=("velocity",) * 6, values=(0.0,) * 6)
     sysm = _system(state, bonds, dt, Controls([ctrl], state))
     x0 = state.pos[1].copy()
-    speed = DELTA_F / (steps_per_df * dt)
+    speed = scale / (steps_per_df * dt)
     delta, force = [], []
     target_prev = 0.0
     for target in PULL_PATH:
@@ -126,20 +128,32 @@ def run_pull(level, out_dir: Path, comm) -> list:
     for mode, r in results.items():
         metrics.append(report_only(f"peak_delta_{mode}", r["d_peak"] / DELTA_F, reference=1 / 3,
                                    note="opening at peak / δ_f"))
+    # pure shear through the mixed-mode opening, δ_tc = δ_f/2: peak σ_c·δ_f/δ_tc, same G_f
+    dtc = 0.5 * DELTA_F
+    ds, fs, _ = pull_apart("damage", steps, delta_tc=dtc)
+    first = np.arange(len(ds)) < np.argmax(ds >= PULL_PATH[0] * dtc - 1e-15)
+    shear_peak = float(np.max(np.where(first, fs, -np.inf)))
+    shear_work = float(np.sum(0.5 * (fs[1:] + fs[:-1]) * np.diff(ds)))
+    shear_peak_ref = area * SIGMA_C * DELTA_F / dtc
+    metrics += [at_most("shear_peak_rel_error", abs(shear_peak / shear_peak_ref - 1), 5e-3, reference=0.0),
+                at_most("shear_energy_rel_error", abs(shear_work / work_ref - 1), 5e-3, reference=0.0)]
+    results["shear (damage, δ_tc = δ_f/2)"] = dict(d=ds * DELTA_F / dtc, f=fs * dtc / DELTA_F, area=area)
     if comm.rank == 0:
         def draw(plt):
             fig, ax = plt.subplots(figsize=(6.5, 4.2))
             x = np.linspace(0, 1.05, 400)
             ax.plot(x, shape_g(x), "k-", lw=3, alpha=0.3, label="eq 28: σ(δ)/σ_c")
-            for mode, st in (("reversible", "C0-"), ("damage", "C3--")):
+            for mode, st in (("reversible", "C0-"), ("damage", "C3--"),
+                             ("shear (damage, δ_tc = δ_f/2)", "C2:")):
                 r = results[mode]
                 ax.plot(r["d"] / DELTA_F, r["f"] / (r["area"] * SIGMA_C), st, lw=1.2,
-                        label=f"DEM, {mode} (load 0.5 → unload 0.2 → reload → break)")
+                        label=f"DEM, {mode} (load 0.5 → unload 0.2 → reload → break)"
+                        if "shear" not in mode else f"DEM, {mode}: δt/δ_tc, F·δ_tc/(δ_f A σ_c)")
             ax.axvline(1 / 3, color="grey", lw=0.6, ls=":")
-            ax.set_xlabel("opening δ/δ_f")
+            ax.set_xlabel("opening δ/δ_f (shear: δt/δ_tc)")
             ax.set_ylabel("F/(A σ_c)")
             ax.set_title(f"cohesive_pull: peak err {peak_err:.1e}, work err {work_err:.1e}")
-            ax.legend(fontsize=8, loc="upper right")
+            ax.legend(fontsize=7, loc="lower center")
             return fig
         _plot(out_dir / "cohesive_pull.png", draw)
     return metrics
