@@ -129,3 +129,19 @@ def test_one_and_two_ranks_agree():
     one, two = _run(1), _run(2)
     assert np.allclose(one["u"], two["u"], atol=1e-7, rtol=0)
     assert abs(one["steps"] - two["steps"]) <= 1
+
+
+def test_newton_and_picard_reach_the_same_solution():
+    """Both linearisations solve the same discrete CN equations (5 steps of a Re-100 cavity)."""
+    tm = rectangle(MPI.COMM_WORLD, n=(12, 12))
+    bcs = (BoundaryCondition(boundary="top", kind="velocity", value=(1.0, 0.0)),
+           BoundaryCondition(boundary="left", kind="no_slip"), BoundaryCondition(boundary="right", kind="no_slip"),
+           BoundaryCondition(boundary="bottom", kind="no_slip"))
+    out, its = {}, {}
+    for nl in ("newton", "picard"):
+        cfg = FluidConfig(density=1.0, viscosity=0.01, boundaries=bcs, nonlinear=nl, rtol=1e-10, atol=1e-13)
+        ns = NavierStokes(tm.mesh, cfg, 0.05, facet_tags=tm.facet_tags, boundary_names=tm.names)
+        its[nl] = sum(ns.step().iterations for _ in range(5))
+        out[nl] = ns.U.x.array.copy()
+    assert np.abs(out["newton"] - out["picard"]).max() < 1e-8
+    assert its["newton"] < its["picard"]

@@ -421,6 +421,15 @@ class NavierStokes:
             raise KeyError(f"unknown boundary {name!r}; known: {sorted(self.boundary_names)}")
         return self.facet_tags.find(self.boundary_names[name])
 
+    def force(self, name: str) -> np.ndarray:
+        """Force of the fluid on the named boundary (N; N/m in 2D) at the current state, by the
+        variational reaction of the momentum residual (``forces.ReactionForce``). Collective."""
+        from .forces import ReactionForce
+        cache = self.__dict__.setdefault("_reactions", {})
+        if name not in cache:
+            cache[name] = ReactionForce(self.W, self.F_form, self.boundary_facets(name))
+        return cache[name]()
+
     def divergence_l2(self) -> float:
         """‖∇·u‖_L2 of the current velocity (1/s)."""
         u, _ = ufl.split(self.U)

@@ -304,3 +304,45 @@ def cylinder_2d2(level, out_dir: Path, comm) -> list[Metric]:
             rel_error_metric("c_D_max", cd_max, ST_2D2["c_D_max"], 0.01),
             rel_error_metric("c_L_max", cl_max, ST_2D2["c_L_max"], 0.03),
             report_only("wall_seconds", wall, unit="s", note=f"h_cyl {h_cyl}, dt {dt}, t_end {t_end}")]
+
+
+# ------------------------------------------------------------ Schäfer–Turek 3D-1Z
+def cylinder_3d1z_solution(comm, h_cyl: float, h_far: float, petsc: dict):
+    """Steady Re 20 flow in the square channel (U_m = 0.45, Ū = 0.2): (c_D, c_L, Δp, cells)."""
+    tm = channel.channel_3d(comm, h_cyl=h_cyl, h_far=h_far)
+    cfg = dataclasses.replace(channel_config(0.45, 1.0, False, petsc), rtol=1e-7)
+    ns = NavierStokes(tm.mesh, cfg, 0.5, facet_tags=tm.facet_tags, boundary_names=tm.names)
+    ns.run_to_steady(tol=1e-6, max_steps=60, growth=2.0, dt_max=1e3)
+    force = ReactionForce(ns.W, ns.F_form, ns.boundary_facets("cylinder"))()
+    scale = 2.0 / (1.0 * 0.2 ** 2 * 0.1 * 0.41)
+    p = probe(ns.p, np.array([[0.45, 0.2, 0.205], [0.55, 0.2, 0.205]]))
+    ncells = tm.mesh.topology.index_map(3).size_global
+    return float(scale * force[0]), float(scale * force[1]), float(p[0] - p[1]), ncells
+
+
+@register("cylinder_3d1z", "Schäfer–Turek 3D-1Z (Re 20, steady, square channel): drag and pressure drop", issue=3)
+def cylinder_3d1z(level, out_dir: Path, comm) -> list[Metric]:
+    from ...fluid.solvers import ITERATIVE_3D
+    levels = [(0.02, 0.06)] if level == "quick" else [(0.02, 0.06), (0.015, 0.04), (0.01, 0.03)]
+    rows = []
+    for h_cyl, h_far in levels:
+        t0 = time.perf_counter()
+        rows.append((h_cyl,) + cylinder_3d1z_solution(comm, h_cyl, h_far, ITERATIVE_3D) + (time.perf_counter() - t0,))
+        log.info("3D-1Z h_cyl %g: c_D %.5f c_L %.5f dp %.5f cells %d (%.1f s)", *rows[-1])
+    c_d, c_l, dp, ncells = rows[-1][1:5]
+    if comm.rank == 0:
+        plt = _plt()
+        fig, ax = plt.subplots(1, 2, figsize=(8, 3.4))
+        cells = [r[4] for r in rows]
+        for a, (key, j) in zip(ax, (("c_D", 1), ("dp", 3))):
+            a.semilogx(cells, [r[j] for r in rows], "o-", label="P1/P1 reaction force")
+            a.axhline(ST_3D1Z[key], color="k", ls="--", label="Schäfer–Turek")
+            a.set_xlabel("cells"), a.set_title(key)
+        ax[0].legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out_dir / "cylinder_3d1z_convergence.png", dpi=110)
+        plt.close(fig)
+    return [rel_error_metric("c_D", c_d, ST_3D1Z["c_D"], 0.02),
+            rel_error_metric("dp", dp, ST_3D1Z["dp"], 0.03),
+            report_only("c_L", c_l, reference=ST_3D1Z["c_L"], note="no target in issue #3"),
+            report_only("cells", float(ncells), note="finest mesh")]
