@@ -6,16 +6,28 @@ import pytest
 
 from fcm_fsi.config.loader import ConfigError, build
 from fcm_fsi.config.structure import CohesiveConfig, StructureConfig
-from fcm_fsi.dem.builder import KINDS, assemble, build_building, load_structure
+from fcm_fsi.dem.builder import (KINDS, PAPER_BUILDING, assemble, build_building,
+                                 load_structure, paper_building)
 from fcm_fsi.dem.cohesive import CohesiveLaw
 
-PAPER = Path(__file__).resolve().parents[1] / "cases" / "building_paper.yaml"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def paper():
-    cfg, coh = load_structure(PAPER)
+    cfg, coh = paper_building()
     return cfg, coh, build_building(cfg)
+
+
+def test_structure_and_cohesive_sections_read_from_a_case_file(tmp_path):
+    import yaml
+    path = tmp_path / "case.yaml"
+    path.write_text(yaml.safe_dump({"name": "b", "dem": dict(PAPER_BUILDING)}))
+    assert load_structure(path) == paper_building()
+    bad = {"name": "b", "dem": {"structure": {**PAPER_BUILDING["structure"], "storys": 2}}}
+    path.write_text(yaml.safe_dump(bad))
+    with pytest.raises(ConfigError, match="dem.structure.storys.*did you mean"):
+        load_structure(path)
 
 
 def brute_force_touching(lo, hi, tol=1e-9):
@@ -151,7 +163,7 @@ def test_docs_list_every_schema_field():
     """docs/cohesive.md carries the field tables of the three schema classes."""
     import dataclasses
     from fcm_fsi.config.structure import OpeningConfig
-    text = (PAPER.parents[1] / "docs" / "cohesive.md").read_text()
+    text = (ROOT / "docs" / "cohesive.md").read_text()
     for cls, prefix in ((CohesiveConfig, "dem.cohesive"), (StructureConfig, "dem.structure"),
                         (OpeningConfig, "dem.structure.openings[]")):
         assert f"| key `{prefix}.…` |" in text

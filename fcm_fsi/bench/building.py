@@ -1,4 +1,4 @@
-"""Benchmark: the paper's building (cases/building_paper.yaml) collapsing under gravity.
+"""Benchmark: the paper's building (``builder.PAPER_BUILDING``) collapsing under gravity.
 
     python -m fcm_fsi.bench building [--t-end 1.0] [--dt 1e-5] [--out DIR] [--mode reversible]
 
@@ -19,12 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dem.builder import KINDS, Structure, build_building, load_structure
+from ..dem.builder import KINDS, Structure, build_building, paper_building
 from ..dem.cohesive import CohesiveLaw
 from ..io.logging import get_logger, setup_logging
 
 log = get_logger("bench.building")
-CASE = Path(__file__).resolve().parents[2] / "cases" / "building_paper.yaml"
 
 
 def box_corners(lo, hi, pos0, pos, quat) -> np.ndarray:
@@ -87,7 +86,7 @@ def run(argv: list[str]) -> int:
     from ..dem.contact import Materials, SphereContact, WallContact, damping_ratio
     from ..dem.system import DEMSystem
 
-    cfg, coh = load_structure(CASE)
+    cfg, coh = paper_building()
     full = build_building(cfg)
     keep = ~((full.storey == 0) & np.isin(full.kind, [KINDS.index("column"), KINDS.index("wall")]))
     s = full.subset(keep)
