@@ -46,7 +46,7 @@ def type_name(tp: Any) -> str:
         if len(args) == 2 and args[1] is Ellipsis:
             return f"list of {type_name(args[0])}"
         return f"list of {len(args)} {type_name(args[0])}"
-    if origin is dict:
+    if origin is dict or tp is dict:
         return "mapping"
     if dataclasses.is_dataclass(tp):
         return "mapping"
@@ -94,7 +94,7 @@ def _convert(ctx: _Ctx, key: str, tp: Any, value: Any, meta: dict) -> Any:
             item_types = list(args)
         return tuple(_convert(ctx, f"{key}[{i}]", it, v, meta)
                      for i, (it, v) in enumerate(zip(item_types, value)))
-    if origin is dict:
+    if origin is dict or tp is dict:
         if not isinstance(value, dict):
             ctx.fail(key, f"= {value!r} must be a mapping")
         for k, v in value.items():
