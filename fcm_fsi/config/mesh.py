@@ -21,11 +21,12 @@ class RefineZone:
 class MeshConfig:
     """Structured rectangle/box meshes from dolfinx, or gmsh meshes (generated and cached, or a file)."""
 
-    kind: Literal["rectangle", "box", "gmsh_box", "gmsh_file"] = param(doc="rectangle/box: structured simplices; gmsh_box: unstructured gmsh box/rectangle with refine zones; gmsh_file: a .msh file")
+    kind: Literal["rectangle", "box", "gmsh_box", "gmsh_disk", "gmsh_file"] = param(doc="rectangle/box: structured simplices; gmsh_box: unstructured gmsh box/rectangle with refine zones; gmsh_disk: unstructured disk (2D) of `radius` centred in lower..upper; gmsh_file: a .msh file")
     lower: tuple[float, ...] = param((0.0, 0.0), unit="m", doc="lower corner of the domain (2 or 3 numbers)")
     upper: tuple[float, ...] = param((1.0, 1.0), unit="m", doc="upper corner of the domain (2 or 3 numbers)")
     cells: tuple[int, ...] = param((32, 32), doc="cells per direction for rectangle/box", ge=1)
-    size: float = param(0.05, unit="m", doc="target cell size for gmsh_box", gt=0)
+    size: float = param(0.05, unit="m", doc="target cell size for gmsh_box and gmsh_disk", gt=0)
+    radius: float = param(1.0, unit="m", doc="gmsh_disk radius (the disk is centred in the lower..upper box)", gt=0)
     refine: tuple[RefineZone, ...] = param(default_factory=tuple, doc="gmsh_box refine zones")
     file: str = param("", doc="path of a gmsh .msh file for gmsh_file (relative to the case file)")
     diagonal: Literal["right", "left", "crossed"] = param("right", doc="triangle diagonal for rectangle meshes")
@@ -37,6 +38,8 @@ class MeshConfig:
             raise ConfigError(f"key 'mesh.upper' = {list(self.upper)} must exceed mesh.lower = {list(self.lower)} in every direction")
         if self.kind in ("rectangle", "box") and len(self.cells) != len(self.lower):
             raise ConfigError(f"key 'mesh.cells' must have {len(self.lower)} entries, one per direction")
+        if self.kind == "gmsh_disk" and self.dim != 2:
+            raise ConfigError("key 'mesh.kind' = 'gmsh_disk' is 2D: give 2 entries in mesh.lower/upper")
         if self.kind == "gmsh_file" and not self.file:
             raise ConfigError("key 'mesh.file' is required when mesh.kind = 'gmsh_file'")
 

@@ -29,7 +29,7 @@ def build_mesh(cfg: MeshConfig, comm: MPI.Comm, case_dir: Path | None = None) ->
             raise ConfigError("key 'mesh.kind' = 'box' needs 3 entries in mesh.lower/upper")
         msh = dmesh.create_box(comm, [np.array(cfg.lower), np.array(cfg.upper)], list(cfg.cells),
                                dmesh.CellType.tetrahedron, dmesh.GhostMode.shared_facet)
-    elif cfg.kind == "gmsh_box":
+    elif cfg.kind in ("gmsh_box", "gmsh_disk"):
         msh = gmsh_box(cfg, comm)
     else:
         msh = gmsh_file(cfg, comm, case_dir)
@@ -59,7 +59,7 @@ def min_cell_size(msh: dmesh.Mesh) -> float:
 
 
 def gmsh_box(cfg: MeshConfig, comm: MPI.Comm) -> dmesh.Mesh:
-    """Unstructured rectangle/box from gmsh with box-shaped refine zones (built on rank 0)."""
+    """Unstructured rectangle/box/disk from gmsh with box-shaped refine zones (built on rank 0)."""
     import gmsh
     from dolfinx.io import gmshio
 
@@ -69,7 +69,10 @@ def gmsh_box(cfg: MeshConfig, comm: MPI.Comm) -> dmesh.Mesh:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add("box")
         lo, hi = np.array(cfg.lower), np.array(cfg.upper)
-        if dim == 2:
+        if cfg.kind == "gmsh_disk":
+            c = 0.5 * (lo + hi)
+            tag = gmsh.model.occ.addDisk(c[0], c[1], 0.0, cfg.radius, cfg.radius)
+        elif dim == 2:
             tag = gmsh.model.occ.addRectangle(lo[0], lo[1], 0.0, *(hi - lo))
         else:
             tag = gmsh.model.occ.addBox(*lo, *(hi - lo))
