@@ -568,3 +568,66 @@ class WallContact:
 
     def restore(self, arrays):
         self.hist = np.asarray(arrays["hist"], np.float64).reshape(self.hist.shape)
+
+
+def wall_forces_ref(blk_sph_start, sph_pos, sph_radius, sph_material, sph_block, pos, vel, omega, mass,
+                    fixed, planes, plane_mat, hist, mat_k, mat_kt, mat_h, mat_mu, clip, dt):
+    """NumPy reference of :func:`wall_forces` for half-space walls only (loops over the
+    planes, vectorised over spheres). Returns (force, torque, new_hist, (e, d_dash, d_fric))."""
+    force = np.zeros_like(pos)
+    torque = np.zeros_like(pos)
+    hist = hist.copy()
+    tot = np.zeros(3)
+    b = sph_block
+    live = ~fixed[b]
+    for w in range(planes.shape[0]):
+        nrm = -planes[w, :3]
+        delta = sph_radius - (sph_pos @ planes[w, :3] - planes[w, 3])
+        n = np.tile(nrm, (len(delta), 1))
+        xc = sph_pos + (sph_radius - 0.5 * delta)[:, None] * n
+        u = vel[b] + np.cross(omega[b], xc - pos[b])
+        wm = plane_mat[w]
+        a = sph_material
+        k = 2 * mat_k[a] * mat_k[wm] / (mat_k[a] + mat_k[wm])
+        kt = 2 * mat_kt[a] * mat_kt[wm] / (mat_kt[a] + mat_kt[wm])
+        h = 0.5 * (mat_h[a] + mat_h[wm])
+        mu = np.minimum(mat_mu[a], mat_mu[wm])
+        c, ct = 2 * h * np.sqrt(mass[b] * k), 2 * h * np.sqrt(mass[b] * kt)
+        un = np.sum(u * n, axis=1)
+        ut = u - un[:, None] * n
+        H = hist[:, w]
+        FN = k * delta + c * un
+        if clip:
+            FN = np.maximum(FN, 0.0)
+        fdn = FN - k * delta
+        d_dash = 0.5 * (fdn + H[:, 3]) * un * dt
+        hh = H[:, :3]
+        h2 = np.sum(hh * hh, axis=1)
+        hp = hh - np.sum(hh * n, axis=1)[:, None] * n
+        p2 = np.sum(hp * hp, axis=1)
+        scale = np.where((h2 > 0) & (p2 > 0), np.sqrt(h2 / np.where(p2 > 0, p2, 1)), 1.0)
+        hold = np.where((h2 > 0)[:, None], hp * scale[:, None], hh)
+        hn = hold + ut * dt
+        ft = -kt[:, None] * hn - ct[:, None] * ut
+        ftn = np.linalg.norm(ft, axis=1)
+        fmax = mu * FN
+        slip = ftn > fmax
+        ft_s = ft * np.where(ftn > 0, fmax / np.where(ftn > 0, ftn, 1), 0)[:, None]
+        h_s = -ft_s / kt[:, None]
+        d_fric = np.where(slip, 0.5 * kt * np.sum((hn - h_s) * (hold + h_s), axis=1), 0.0)
+        g = np.where(slip[:, None], 0.0, -ct[:, None] * ut)
+        d_dash = d_dash - 0.5 * np.sum((g + H[:, 4:7]) * ut, axis=1) * dt
+        ft = np.where(slip[:, None], ft_s, ft)
+        hn = np.where(slip[:, None], h_s, hn)
+        f = -FN[:, None] * n + ft
+        e_s = 0.5 * k * delta ** 2 + 0.5 * kt * np.sum(hn * hn, axis=1)
+        on = (delta > 0) & live
+        rel = 0.5 * H[:, 3] * un * dt - 0.5 * np.sum(H[:, 4:7] * ut, axis=1) * dt
+        new = np.concatenate([hn, fdn[:, None], g], axis=1)
+        new[~on] = 0.0
+        hist[:, w] = np.where(live[:, None], new, H)
+        f[~on] = 0.0
+        np.add.at(force, b, f)
+        np.add.at(torque, b, np.cross(xc - pos[b], f))
+        tot += [e_s[on].sum(), np.where(on, d_dash, np.where(live, rel, 0.0)).sum(), d_fric[on].sum()]
+    return force, torque, hist, tuple(tot)

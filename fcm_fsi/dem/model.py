@@ -39,7 +39,7 @@ def _generated(g: GeneratorConfig, tmpl: BlockTemplate) -> tuple[np.ndarray, np.
     rng = np.random.default_rng(g.seed)
     R = float(np.max(np.linalg.norm(tmpl.sph_local, axis=1) + tmpl.sph_radius))
     a = 2.0 * R * 1.05
-    lo, hi = np.asarray(g.region_min) + R, np.asarray(g.region_max) - R
+    lo, hi = np.asarray(g.region_min) + 1.05 * R, np.asarray(g.region_max) - 1.05 * R   # room for the jitter
     n = np.maximum(np.floor((hi - lo) / a).astype(int) + 1, 1)
     if np.any(hi < lo) or np.prod(n) < g.count:
         raise ConfigError(f"key 'dem.generators[].count' = {g.count} blocks of bounding radius {R:.4g} m "

@@ -1,0 +1,125 @@
+"""DEM throughput benchmark (not a test): ``python -m fcm_fsi.bench dem [--sizes 10000 100000]
+[--threads 1 2] [--steps 200] [--write-docs]``.
+
+Set-up (reproducible; the same packing can be given to another DEM code):
+
+- clumps of three spheres, r = 5 mm, local centres (0, 0, 0), (6, 0, 0), (3, 5, 0) mm;
+  solid density 2500 kg/m³ (mass from the spheres, overlaps not subtracted)
+- N/3 clumps on a cubic lattice of spacing 2·R_b·1.05 (R_b = bounding radius about the
+  centre of mass = 8.45 mm) filling a square-based column, uniformly random orientations
+  (seed 1) and uniformly random velocities in [−0.5, 0.5] m/s per component (seed 1)
+- closed box walls 1 mm beyond the lattice's extent; gravity (0, 0, −9.81) m/s²
+- contact: K = 1e5 N/m (normal = tangential), e = 0.3, friction angle 30°, normal force
+  clipped at zero; Verlet skin 1.5 mm (0.3 r), rebuild at skin/2
+- dt = 2.5e-5 s (≈ 0.17 Δt_cr); 20 warm-up steps, then ``--steps`` timed steps; ledger off
+- sphere-steps/s = N·steps / wall; contact updates/s = Σ over timed steps of active
+  sphere–sphere contacts / wall; pair evaluations/s = Σ Verlet pairs / wall
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+
+R = 0.005
+SPHERES = [[0.0, 0.0, 0.0, R], [1.2 * R, 0.0, 0.0, R], [0.6 * R, 1.0 * R, 0.0, R]]
+
+
+def bench_config(n_spheres: int) -> dict:
+    """The DEM section of the benchmark box (see module docstring)."""
+    nc = n_spheres // 3
+    Rb = 1.69 * R
+    a = 2 * Rb * 1.05
+    nx = max(int(math.ceil((nc / 2.0) ** (1 / 3))), 1)        # column twice as tall as wide
+    nz = int(math.ceil(nc / (nx * nx)))
+    side = nx * a + 2.2 * Rb
+    height = nz * a + 2.2 * Rb
+    return {"dt": 2.5e-5, "skin": 0.3 * R, "gravity": [0, 0, -9.81],
+            "materials": [{"name": "g", "stiffness": 1e5, "restitution": 0.3, "friction_angle": 30.0,
+                           "density": 2500.0}],
+            "generators": [{"block": {"shape": "clump", "material": "g", "position": [0, 0, 0], "spheres": SPHERES},
+                            "count": nc, "region_min": [0, 0, 0], "region_max": [side, side, height], "seed": 1}],
+            "walls": [{"kind": "box", "material": "g", "lo": [-1e-3] * 3, "hi": [side + 1e-3, side + 1e-3, height + 1e-3]}]}
+
+
+def measure(n_spheres: int, threads: int, steps: int) -> dict:
+    import numba
+
+    from ..config.dem import DEMConfig
+    from ..config.loader import build
+    from ..dem.model import build_system
+    numba.set_num_threads(threads)
+    s = build_system(build(DEMConfig, bench_config(n_spheres), "<bench>", "dem"), with_ledger=False)
+    rng = np.random.default_rng(1)
+    s.state.vel[:] = rng.uniform(-0.5, 0.5, size=s.state.vel.shape)
+    contact = s.interactions[0]
+    s.run(20)
+    builds0 = contact.neighbours.builds
+    ncon = npair = 0
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        s.step()
+        ncon += contact.n_contacts
+        npair += len(contact.neighbours.pairs)
+    wall = time.perf_counter() - t0
+    ns = s.state.ns
+    return {"spheres": ns, "threads": threads, "steps": steps, "wall": wall,
+            "sphere_steps_per_s": ns * steps / wall, "contact_updates_per_s": ncon / wall,
+            "pair_evals_per_s": npair / wall, "contacts_per_sphere": ncon / steps / ns,
+            "rebuilds": contact.neighbours.builds - builds0, "dt_over_dt_cr": s.dt / s.critical_time_step()}
+
+
+def table(rows: list[dict]) -> str:
+    out = ["| spheres | threads | steps | wall [s] | sphere-steps/s | contact updates/s | pair evals/s | contacts/sphere | list rebuilds |",
+           "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        out.append(f"| {r['spheres']} | {r['threads']} | {r['steps']} | {r['wall']:.2f} | {r['sphere_steps_per_s']:.3g} | "
+                   f"{r['contact_updates_per_s']:.3g} | {r['pair_evals_per_s']:.3g} | {r['contacts_per_sphere']:.2f} | {r['rebuilds']} |")
+    return "\n".join(out)
+
+
+def write_docs(rows: list[dict], path: Path) -> None:
+    """Replace (or append) the ``## DEM`` section of docs/performance.md."""
+    import platform
+    head = ("## DEM\n\n`python -m fcm_fsi.bench dem --write-docs` (fcm_fsi/bench/dem.py). Set-up, exactly:\n\n"
+            + "\n".join(line[2:] if line.startswith("  ") else line for line in
+                        (__doc__.split("Set-up (reproducible; the same packing can be given to another DEM code):")[1]
+                         .strip("\n").splitlines()))
+            + f"\n\nMachine: {platform.processor() or platform.machine()}, {os.cpu_count()} logical cores "
+              "shared with other jobs while measuring; Numba kernels cached (compile time excluded).\n\n")
+    body = head + table(rows) + "\n"
+    text = path.read_text() if path.exists() else "# Performance\n"
+    m = re.search(r"^## DEM\n.*?(?=^## |\Z)", text, flags=re.S | re.M)
+    text = text[:m.start()] + body + "\n" + text[m.end():] if m else text.rstrip("\n") + "\n\n" + body
+    path.write_text(text)
+
+
+def run(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="python -m fcm_fsi.bench dem", description=__doc__.split("\n")[0])
+    p.add_argument("--sizes", type=int, nargs="+", default=[10000, 100000])
+    p.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--steps", type=int, default=200)
+    p.add_argument("--write-docs", action="store_true", help="write the table into docs/performance.md")
+    a = p.parse_args(argv)
+    rows = []
+    for n in a.sizes:
+        for th in a.threads:
+            r = measure(n, th, a.steps)
+            rows.append(r)
+            print(f"{r['spheres']:>8} spheres, {th} thread(s): {r['sphere_steps_per_s']:.3g} sphere-steps/s, "
+                  f"{r['contact_updates_per_s']:.3g} contact updates/s ({r['wall']:.2f} s, "
+                  f"{r['contacts_per_sphere']:.2f} contacts/sphere, dt/Δt_cr = {r['dt_over_dt_cr']:.3f})", flush=True)
+    print(table(rows))
+    if a.write_docs:
+        write_docs(rows, Path(__file__).resolve().parents[2] / "docs" / "performance.md")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+    sys.exit(run(sys.argv[1:]))

@@ -1,0 +1,68 @@
+"""Closed-form contact results: restitution (eq 20, clipped and not), Δt_cr, Coulomb sliding."""
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from fcm_fsi.dem.contact import damping_ratio, restitution_clipped, restitution_unclipped
+from fcm_fsi.dem.system import critical_time_step
+from fcm_fsi.verify.cases.dem import _measure_restitution, _slide
+
+
+def ode_restitution(h: float, clip: bool) -> float:
+    """Integrate m δ'' = −(kδ + cδ') (m = k = 1) from δ = 0, δ' = 1 until the force (clip)
+    or δ (no clip) returns to zero; e = −δ'(end)."""
+    def rhs(t, y):
+        return [y[1], -(y[0] + 2 * h * y[1])]
+
+    def end(t, y):
+        return (y[0] + 2 * h * y[1]) if clip else y[0]
+    end.terminal, end.direction = True, -1
+    sol = solve_ivp(rhs, (0, 10), [0.0, 1.0], events=end, rtol=1e-12, atol=1e-14, first_step=1e-6)
+    return -sol.y_events[0][0][1]
+
+
+@pytest.mark.parametrize("e", [0.2, 0.5, 0.9])
+def test_restitution_closed_forms_match_ode(e):
+    h = damping_ratio(e)
+    assert restitution_unclipped(h) == pytest.approx(e, rel=1e-12)
+    assert ode_restitution(h, clip=False) == pytest.approx(e, rel=1e-8)
+    assert restitution_clipped(h) == pytest.approx(ode_restitution(h, clip=True), rel=1e-8)
+
+
+def test_clipping_raises_restitution_as_spec_says():
+    # SPEC §2 / issue #6: with the force clipped, target e = 0.5 comes out ≈ 0.55
+    assert restitution_clipped(damping_ratio(0.5)) == pytest.approx(0.5503, abs=1e-4)
+
+
+@pytest.mark.parametrize("clip", [True, False])
+@pytest.mark.parametrize("e", [0.2, 0.5, 0.9])
+def test_dem_bounce_restitution_matches_model(e, clip):
+    meas, pred = _measure_restitution(e, clip, 100.0)
+    assert abs(meas - pred) / pred < 0.01
+
+
+def test_critical_time_step_formula():
+    # tutorial §6: m = k = 1, h = 0.5 → Δt_cr = 1.236068
+    assert critical_time_step(1.0, 1.0, 0.5) == pytest.approx(1.236068, abs=1e-6)
+
+
+@pytest.mark.parametrize("dt,stable", [(1.23, True), (1.24, False)])
+def test_leapfrog_spring_dashpot_stability_limit(dt, stable):
+    """The tutorial's check (Fig. 16): m u'' + c u'(lagged) + k u = 0 by leapfrog."""
+    m, k, h = 1.0, 1.0, 0.5
+    c = 2 * h * math.sqrt(m * k)
+    u0, u1 = 1.0, 1.0
+    for _ in range(4000):
+        u0, u1 = u1, (2 - c / m * dt - k / m * dt * dt) * u1 + (c / m * dt - 1) * u0
+    assert (abs(u1) < 1.0) == stable
+
+
+def test_sliding_block_acceleration_is_coulomb():
+    s, t, x, v = _slide(30.0, 20.0, 0.3)
+    a = np.polyfit(t[t > 0.1] - 0.5 * s.dt, v[t > 0.1], 1)[0]
+    ref = 9.81 * (math.sin(math.radians(30)) - math.tan(math.radians(20)) * math.cos(math.radians(30)))
+    assert a == pytest.approx(ref, rel=1e-6)
+    L = s.ledger.last
+    assert abs(L["balance_error"]) < 1e-5 * abs(L["friction_loss"])
