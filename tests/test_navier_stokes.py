@@ -88,7 +88,7 @@ def test_unknown_boundary_name_is_a_config_error():
 def test_nonconvergence_reports_step_time_and_history():
     """One nonlinear iteration allowed with an unreachable tolerance: a clear error, not a silent result."""
     tm = rectangle(MPI.COMM_WORLD, n=(8, 8))
-    cfg = FluidConfig(density=1.0, viscosity=0.01, max_iterations=1, rtol=1e-15, atol=1e-300, boundaries=(
+    cfg = FluidConfig(density=1.0, viscosity=0.01, max_iterations=1, rtol=1e-15, atol=1e-300, startup_steps=0, boundaries=(
         BoundaryCondition(boundary="top", kind="velocity", value=(1.0, 0.0)),
         BoundaryCondition(boundary="left", kind="no_slip"), BoundaryCondition(boundary="right", kind="no_slip"),
         BoundaryCondition(boundary="bottom", kind="no_slip")))

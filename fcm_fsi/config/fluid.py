@@ -59,6 +59,8 @@ class FluidConfig:
                                                       doc="boundary conditions; boundaries not listed are do-nothing")
     theta: float = param(0.5, doc="time scheme: 0.5 = Crank–Nicolson, 1 = backward Euler (pseudo-time to steady states)",
                          ge=0.5, le=1.0)
+    startup_steps: int = param(2, doc="first steps made of two backward-Euler half steps (Rannacher start-up; "
+                                         "damps incompatible initial data that Crank–Nicolson keeps)", ge=0)
     stabilization: StabilizationConfig = param(default_factory=StabilizationConfig, doc="stabilization terms")
     nonlinear: Literal["newton", "picard"] = param(
         "newton", doc="newton: exact Jacobian with τ frozen per iteration; picard: advecting velocity frozen (Oseen)")

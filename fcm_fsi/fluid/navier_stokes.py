@@ -60,6 +60,7 @@ class FormParts:
     tau_supg: fem.Function
     tau_cont: fem.Function
     strain: fem.Function | None = None   # P1 reconstruction of ε(u_θ) for the strong residual
+    rho_pspg: ufl.core.expr.Expr | None = None  # density of the PSPG test ∇q/ρ (default: rho)
 
 
 def epsilon(u):
@@ -99,7 +100,7 @@ def supg_pspg_residual(s: FormParts, supg: bool, pspg: bool):
     if supg:
         test = test + ufl.grad(s.w) * s.a
     if pspg:
-        test = test + ufl.grad(s.q) / s.rho
+        test = test + ufl.grad(s.q) / (s.rho_pspg if s.rho_pspg is not None else s.rho)
     if test == 0:
         return None
     return s.tau_supg * ufl.inner(test, momentum_residual(s)) * s.dx
@@ -173,6 +174,9 @@ class NavierStokes:
     velocity_functions: boundary name → ``fn(x, t)`` velocity (gdim × n array), replacing
         the configured condition there (e.g. an exact solution).
     petsc_prefix, petsc_options: options prefix of the (u, p) solve and extra options.
+    pspg_density: density in the PSPG test function ∇q/ρ (default ``rho``). With a density
+        jump inside a cell (two-phase), a cell-wise mean ρ keeps the PSPG term from weighting
+        the pressure residual by 1/ρ_gas on the gas side of interface cells.
     """
 
     def __init__(self, mesh, config: FluidConfig, dt: float, *, facet_tags=None,
@@ -180,7 +184,7 @@ class NavierStokes:
                  dx: ufl.Measure | None = None, extra_terms: Sequence[ExtraTerm] = (),
                  extra_bcs: Sequence[fem.DirichletBC] = (),
                  velocity_functions: dict[str, Callable] | None = None, petsc_prefix: str = "ns_",
-                 petsc_options: dict | None = None) -> None:
+                 petsc_options: dict | None = None, pspg_density=None) -> None:
         self.mesh, self.config, self.comm = mesh, config, mesh.comm
         cell = mesh.ufl_cell()
         gdim = mesh.geometry.dim
@@ -194,9 +198,10 @@ class NavierStokes:
         self.u_nm1 = fem.Function(self.V, name="u_nm1")  # velocity at t^{n-1} (strain extrapolation)
         self.dt = fem.Constant(mesh, PETSc.ScalarType(dt))
         self.t, self.step_count = 0.0, 0
-        self.theta = config.theta
+        self.theta = fem.Constant(mesh, PETSc.ScalarType(config.theta))   # switched during start-up
         self.facet_tags, self.boundary_names = facet_tags, dict(boundary_names or {})
         self.rho = rho if rho is not None else fem.Constant(mesh, PETSc.ScalarType(config.density))
+        self.rho_pspg = pspg_density
         self.mu = mu if mu is not None else fem.Constant(mesh, PETSc.ScalarType(config.viscosity))
         g = tuple(config.gravity) + (0.0,) * max(0, gdim - len(config.gravity))
         self.f = fem.Constant(mesh, np.asarray(g[:gdim], dtype=PETSc.ScalarType))
@@ -252,7 +257,7 @@ class NavierStokes:
         a = u_theta if self.config.nonlinear == "newton" else self.u_adv
         return FormParts(u=u, p=p, u_n=u_n, u_theta=u_theta, a=a, w=w, q=q, rho=self.rho, mu=self.mu,
                          f=self.f, dt=self.dt, dx=self.dx, tau_supg=self.tau_supg, tau_cont=self.tau_cont,
-                         strain=self.strain)
+                         strain=self.strain, rho_pspg=self.rho_pspg)
 
     def _residual(self, extra_terms: Sequence[ExtraTerm]):
         s, st = self.parts, self.config.stabilization
@@ -308,7 +313,7 @@ class NavierStokes:
 
     def update_tau(self) -> None:
         """Advecting velocity a = θ u^k + (1 − θ) uⁿ, then τ_supg and τ_cont cell-wise (eqs 6–10)."""
-        th = self.theta
+        th = float(self.theta.value)
         self.u_adv.x.array[:] = (th * self.U.x.array[self.V_map] + (1 - th) * self.U_n.x.array[self.V_map])
         self.tau_supg.interpolate(self._tau_exprs[0])
         self.tau_cont.interpolate(self._tau_exprs[1])
@@ -345,7 +350,33 @@ class NavierStokes:
         self.A.assemble()
 
     def step(self) -> StepInfo:
-        """Advance one time step: uⁿ ← u, t ← t + Δt, nonlinear solve to rtol/atol (collective)."""
+        """Advance one time step Δt (collective).
+
+        The first ``config.startup_steps`` steps are each made of two backward-Euler half
+        steps (Rannacher start-up): they damp the incompatible part of the initial data,
+        which Crank–Nicolson alone never damps, without losing second order.
+        """
+        if self.step_count >= self.config.startup_steps or self.config.theta == 1.0:
+            return self._advance()
+        dt, theta = float(self.dt.value), float(self.theta.value)
+        self.dt.value, self.theta.value = 0.5 * dt, 1.0
+        try:
+            first = self._advance()
+            second = self._advance()
+        finally:
+            self.dt.value, self.theta.value = dt, theta
+        self.step_count -= 1
+        second.step = self.step_count
+        second.iterations += first.iterations
+        second.residuals = first.residuals + second.residuals
+        second.krylov_iterations += first.krylov_iterations
+        second.assembly_seconds += first.assembly_seconds
+        second.solve_seconds += first.solve_seconds
+        self.history[-2:] = [second]
+        return second
+
+    def _advance(self) -> StepInfo:
+        """uⁿ ← u, t ← t + Δt, nonlinear solve to rtol/atol (collective)."""
         self.u_nm1.x.array[:] = self.U_n.x.array[self.V_map]
         self.U_n.x.array[:] = self.U.x.array
         self.update_strain()
