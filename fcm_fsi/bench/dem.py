@@ -5,10 +5,13 @@ Set-up (reproducible; the same packing can be given to another DEM code):
 
 - clumps of three spheres, r = 5 mm, local centres (0, 0, 0), (6, 0, 0), (3, 5, 0) mm;
   solid density 2500 kg/m³ (mass from the spheres, overlaps not subtracted)
-- N/3 clumps on a cubic lattice of spacing 2·R_b·1.05 (R_b = bounding radius about the
-  centre of mass = 8.45 mm) filling a square-based column, uniformly random orientations
-  (seed 1) and uniformly random velocities in [−0.5, 0.5] m/s per component (seed 1)
-- closed box walls 1 mm beyond the lattice's extent; gravity (0, 0, −9.81) m/s²
+- N/3 clumps, all in the same orientation (plane of the three centres horizontal), on an
+  orthorhombic lattice of spacings 0.999 × (3.2 r, 3.0 r, 2.0 r) — the clump's extents, so
+  neighbouring clumps touch with 0.1 % overlap — sphere 0 of clump (i, j, k) at
+  (r, r, r) + (i, j, k)·spacing, i fastest; n_x = ⌈1.5 (N/12)^{1/3}⌉, n_y = round(n_x·3.2/3.0),
+  n_z = ⌈(N/3)/(n_x n_y)⌉; initial velocities uniform in [−0.5, 0.5] m/s per component
+  (numpy default_rng(1)), no initial spin
+- closed box walls from −1 mm to (n_x, n_y, n_z)·spacing + 1 mm; gravity (0, 0, −9.81) m/s²
 - contact: K = 1e5 N/m (normal = tangential), e = 0.3, friction angle 30°, normal force
   clipped at zero; Verlet skin 1.5 mm (0.3 r), rebuild at skin/2
 - dt = 2.5e-5 s (≈ 0.17 Δt_cr); 20 warm-up steps, then ``--steps`` timed steps; ledger off
@@ -33,18 +36,21 @@ SPHERES = [[0.0, 0.0, 0.0, R], [1.2 * R, 0.0, 0.0, R], [0.6 * R, 1.0 * R, 0.0, R
 def bench_config(n_spheres: int) -> dict:
     """The DEM section of the benchmark box (see module docstring)."""
     nc = n_spheres // 3
-    Rb = 1.69 * R
-    a = 2 * Rb * 1.05
-    nx = max(int(math.ceil((nc / 2.0) ** (1 / 3))), 1)        # column twice as tall as wide
-    nz = int(math.ceil(nc / (nx * nx)))
-    side = nx * a + 2.2 * Rb
-    height = nz * a + 2.2 * Rb
+    spacing = np.array([3.2 * R, 3.0 * R, 2.0 * R]) * 0.999        # clump extents: neighbours just touch
+    nx = max(int(math.ceil((nc / 4.0) ** (1 / 3) * 1.5)), 1)          # column ≈ 2× as tall as wide
+    ny = max(int(round(nx * spacing[0] / spacing[1])), 1)
+    nz = int(math.ceil(nc / (nx * ny)))
+    idx = np.arange(nc)
+    ijk = np.stack([idx % nx, (idx // nx) % ny, idx // (nx * ny)], axis=1)
+    origin = ijk * spacing + np.array([R, R, R])                     # sphere 0 of each clump
+    blocks = [{"shape": "clump", "material": "g", "position": [float(v) for v in o], "spheres": SPHERES}
+              for o in origin]
+    hi = (np.array([nx, ny, nz]) * spacing + 1e-3).tolist()
     return {"dt": 2.5e-5, "skin": 0.3 * R, "gravity": [0, 0, -9.81],
             "materials": [{"name": "g", "stiffness": 1e5, "restitution": 0.3, "friction_angle": 30.0,
                            "density": 2500.0}],
-            "generators": [{"block": {"shape": "clump", "material": "g", "position": [0, 0, 0], "spheres": SPHERES},
-                            "count": nc, "region_min": [0, 0, 0], "region_max": [side, side, height], "seed": 1}],
-            "walls": [{"kind": "box", "material": "g", "lo": [-1e-3] * 3, "hi": [side + 1e-3, side + 1e-3, height + 1e-3]}]}
+            "blocks": blocks,
+            "walls": [{"kind": "box", "material": "g", "lo": [-1e-3] * 3, "hi": hi}]}
 
 
 def measure(n_spheres: int, threads: int, steps: int) -> dict:

@@ -193,6 +193,16 @@ def pair_forces(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, 
         delta = sph_radius[i] + sph_radius[j] - dist
         if dist == 0.0:
             continue
+        if delta <= 0.0 and hist[p, 3] == 0.0 and hist[p, 4] == 0.0 and hist[p, 5] == 0.0 and hist[p, 6] == 0.0:
+            # out of contact and nothing to release (the common case in a Verlet list)
+            if hist[p, 0] != 0.0 or hist[p, 1] != 0.0 or hist[p, 2] != 0.0:
+                hist[p, 0] = 0.0
+                hist[p, 1] = 0.0
+                hist[p, 2] = 0.0
+            pair_f[p, 0] = 0.0
+            pair_f[p, 1] = 0.0
+            pair_f[p, 2] = 0.0
+            continue
         nx = dx / dist
         ny = dy / dist
         nz = dz / dist
@@ -359,9 +369,10 @@ def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omeg
                     wm = mesh_mat[m]
                 if delta <= 0.0 and hist[s, w, 3] == 0.0 and hist[s, w, 4] == 0.0 and \
                         hist[s, w, 5] == 0.0 and hist[s, w, 6] == 0.0:
-                    hist[s, w, 0] = 0.0
-                    hist[s, w, 1] = 0.0
-                    hist[s, w, 2] = 0.0
+                    if hist[s, w, 0] != 0.0 or hist[s, w, 1] != 0.0 or hist[s, w, 2] != 0.0:
+                        hist[s, w, 0] = 0.0
+                        hist[s, w, 1] = 0.0
+                        hist[s, w, 2] = 0.0
                     continue
                 if nx == 0.0 and ny == 0.0 and nz == 0.0:
                     for q in range(hist.shape[2]):
