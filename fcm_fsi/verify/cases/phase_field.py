@@ -19,7 +19,7 @@ REVOLUTION = 2.0 * math.pi  # period of u = (−y, x) [s]
 
 # Resolution and length of each level: cells per direction, revolutions for the long runs.
 ROTATING = {"quick": {"cells": 96, "revs": 1}, "full": {"cells": 192, "revs": 5}}
-ZALESAK = {"quick": (64, 96, 128), "full": (96, 192, 384)}
+ZALESAK = {"quick": (64, 96, 128), "full": (96, 160, 256)}
 COURANT = 1.0  # Δt = COURANT · h_min / max|u| (max over the domain: ≈ 0.4 at the interface)
 
 
