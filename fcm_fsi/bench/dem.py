@@ -96,8 +96,12 @@ def write_docs(rows: list[dict], path: Path) -> None:
             + "\n".join(line[2:] if line.startswith("  ") else line for line in
                         (__doc__.split("Set-up (reproducible; the same packing can be given to another DEM code):")[1]
                          .strip("\n").splitlines()))
-            + f"\n\nMachine: {platform.processor() or platform.machine()}, {os.cpu_count()} logical cores "
-              "shared with other jobs while measuring; Numba kernels cached (compile time excluded).\n\n")
+            + f"\n\nMachine: {platform.processor() or platform.machine()}, {os.cpu_count()} logical cores, "
+              f"load average {os.getloadavg()[0]:.1f} when the table was written (the cores were shared "
+              "with other jobs: the 2-thread rows measure contention, not scaling); Numba kernels cached "
+              "(compile time excluded). contacts/sphere = active sphere–sphere contacts (pairs) per "
+              "sphere and step; wall contacts are computed but not counted. Goal of issue #6: "
+              "≥ 5e6 sphere-steps/s at 100k spheres on 2 cores — not reached (see docs/dem.md §5).\n\n")
     body = head + table(rows) + "\n"
     text = path.read_text() if path.exists() else "# Performance\n"
     m = re.search(r"^## DEM\n.*?(?=^## |\Z)", text, flags=re.S | re.M)

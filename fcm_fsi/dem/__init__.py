@@ -39,9 +39,9 @@ An interaction must
    bond damage) are the interaction's own arrays, updated inside ``add_forces``;
 4. do the work in Numba kernels that take arrays only (each with a NumPy reference);
 5. optionally provide ``checkpoint_arrays() -> dict[str, ndarray]`` and
-   ``restore(arrays)`` so a restart is bit-identical, and ``stiffness_bound()`` →
-   ``(k_max [N/m], h)`` used for the stable time step check, and
-   ``on_rebuild(state)`` if it needs to know when sphere neighbours were rebuilt.
+   ``restore(arrays)`` so a restart is bit-identical (the driver stores them under
+   ``interaction_<k>`` in the checkpoint), and ``stiffness_bound()`` → ``(k_max [N/m], h)``
+   used for the stable time step check Δt_cr (``DEMSystem.critical_time_step``).
 
 Register it with ``system.interactions.append(obj)``; the integrator is not edited.
 """
