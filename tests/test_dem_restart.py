@@ -1,11 +1,23 @@
 """A restarted pure-DEM run continues bit-identically (checkpoint → restart == uninterrupted)."""
 import h5py
+import pytest
 import numpy as np
 from mpi4py import MPI
 
 from fcm_fsi.config.case import case_from_dict
 from fcm_fsi.dem.driver import run_dem_case
 from fcm_fsi.verify.cases.dem import repose_config
+
+
+@pytest.fixture(autouse=True)
+def _one_numba_thread():
+    """Pin the kernels to one thread (the 2 cores are shared; results do not depend on it,
+    see test_result_does_not_depend_on_thread_count)."""
+    import numba
+    old = numba.get_num_threads()
+    numba.set_num_threads(1)
+    yield
+    numba.set_num_threads(old)
 
 
 def case(t_end):
@@ -34,3 +46,19 @@ def test_restart_is_bit_identical(tmp_path):
     fa = (tmp_path / "a" / "dem_force_displacement.csv").read_text()
     assert fa == (tmp_path / "b" / "dem_force_displacement.csv").read_text()
     assert "spheres_00012.vtp" in (tmp_path / "b" / "spheres.pvd").read_text()
+
+
+def test_result_does_not_depend_on_thread_count():
+    """Forces are gathered per block in a fixed order, so 1 and 2 threads agree bit for bit."""
+    import numba
+
+    from fcm_fsi.verify.cases.dem import _pour
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs NUMBA_NUM_THREADS >= 2")
+    numba.set_num_threads(1)
+    a = _pour(40, 5, 0.06)
+    numba.set_num_threads(2)
+    b = _pour(40, 5, 0.06)
+    assert a.interactions[0].n_contacts > 0
+    np.testing.assert_array_equal(a.state.pos, b.state.pos)
+    np.testing.assert_array_equal(a.state.quat, b.state.quat)
