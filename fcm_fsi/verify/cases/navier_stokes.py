@@ -66,9 +66,13 @@ def _tg_exact(nu: float):
     return u
 
 
-def _taylor_green_run(comm, n: int, dt: float, t_end: float, nu: float):
-    """Solve TG on [0,1]² with exact Dirichlet data; returns (solver, L2 velocity error at t_end)."""
-    tm = channel.rectangle(comm, (0.0, 0.0), (1.0, 1.0), (n, n), diagonal="crossed")
+def _taylor_green_run(comm, n: int, dt: float, t_end: float, nu: float, tm=None):
+    """Solve TG on [0,1]² with exact Dirichlet data; returns (solver, L2 velocity error at t_end).
+
+    Pass the same ``tm`` to compare runs node by node (the partition is then identical).
+    """
+    if tm is None:
+        tm = channel.rectangle(comm, (0.0, 0.0), (1.0, 1.0), (n, n), diagonal="crossed")
     cfg = FluidConfig(density=1.0, viscosity=nu, rtol=1e-10, atol=1e-13)
     exact = _tg_exact(nu)
     ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names,
@@ -109,7 +113,8 @@ def taylor_green(level, out_dir: Path, comm) -> list[Metric]:
     n_t = 32 if level == "quick" else 64
     t_end_t = 1.0
     dts = np.array([0.2, 0.1, 0.05, 0.025])
-    runs = [_taylor_green_run(comm, n_t, dt, t_end_t, nu_t) for dt in dts]
+    tm = channel.rectangle(comm, (0.0, 0.0), (1.0, 1.0), (n_t, n_t), diagonal="crossed")
+    runs = [_taylor_green_run(comm, n_t, dt, t_end_t, nu_t, tm) for dt in dts]
     diffs = np.array([_l2_diff(runs[i][0], runs[i + 1][0]) for i in range(len(runs) - 1)])
     p_time = np.log(diffs[:-1] / diffs[1:]) / np.log(2.0)
     terr = np.array([r[1] for r in runs])
