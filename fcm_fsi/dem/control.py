@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .integrate import omega_from_angmom
+from .state import quat_to_matrix_np
 
 MODES = ("free", "force", "velocity", "displacement")
 
@@ -72,7 +73,7 @@ class Controls:
                 for d in range(3, 6):
                     if c.modes[d] in ("velocity", "displacement"):
                         w[0, d - 3] = self._target(c, d, t, dt)
-                R = state.rotation_matrices()[b]
+                R = quat_to_matrix_np(state.quat[b])
                 L_new = R @ (state.inertia[b] * (R.T @ w[0]))
                 self.T[b] += (L_new - state.angmom[b]) / dt
                 state.angmom[b] = L_new

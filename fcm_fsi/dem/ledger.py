@@ -9,7 +9,8 @@ Evaluated at step n (after the kick, before the drift), in J:
 - ``kinetic_rot`` Σ ½ L_{n−1/2}·I_w(q_n)⁻¹ L_{n+1/2}, the rotational analogue
 - ``spring``      stored elastic energy of contact springs and cohesive bonds (interactions)
 - ``dashpot_loss``, ``friction_loss``, ``bond_loss``  accumulated dissipation (interactions)
-- ``work_external``  Σ_n Δt [F_ext·(v₋+v₊)/2 + T_ext·(ω₋+ω₊)/2]
+- ``work_external``  Σ_k Δt [F_ext·(v₋+v₊)/2 + T_ext·(ω₋+ω₊)/2] over steps k ≤ n, minus the
+  second half of step n, ½Δt F_n·v_{n+1/2}: the work done up to t_n
 - ``work_control``   the same with the control forces (prescribed-force DOFs and the
   reactions that enforce prescribed velocity/displacement)
 - ``balance_error`` = (potential + kinetic + spring + losses) − (E₀ + work_external +
@@ -54,14 +55,19 @@ class Ledger:
         a["bond_loss"] += float(led[L_BOND_LOSS])
         a["work_external"] += dt * float(np.sum(state.ext_force[free] * vbar) + np.sum(state.ext_torque[free] * wbar))
         a["work_control"] += dt * float(np.sum(F_ctrl[free] * vbar) + np.sum(T_ctrl[free] * wbar))
+        # work up to t_n: the step's midpoint work minus its second half ½Δt F_n·v_{n+1/2}
+        w_ext = a["work_external"] - 0.5 * dt * float(np.sum(state.ext_force[free] * vp[free])
+                                                      + np.sum(state.ext_torque[free] * wp[free]))
+        w_ctl = a["work_control"] - 0.5 * dt * float(np.sum(F_ctrl[free] * vp[free]) + np.sum(T_ctrl[free] * wp[free]))
         spring = float(led[L_SPRING] + led[L_BOND])
         total = pot + kt + kr + spring + a["dashpot_loss"] + a["friction_loss"] + a["bond_loss"]
         if self.E0 is None:
-            self.E0 = total - a["work_external"] - a["work_control"]
+            self.E0 = total - w_ext - w_ctl
         self.scale = max(self.scale, abs(self.E0), kt + kr + spring)
-        bal = total - (self.E0 + a["work_external"] + a["work_control"])
+        bal = total - (self.E0 + w_ext + w_ctl)
         self.last = {"t": state.t, "step": state.step, "potential": pot, "kinetic_trans": kt,
-                     "kinetic_rot": kr, "spring": spring, **a, "total": total,
+                     "kinetic_rot": kr, "spring": spring, **a, "work_external": w_ext, "work_control": w_ctl,
+                     "total": total,
                      "balance_error": bal, "balance_rel": abs(bal) / self.scale if self.scale > 0 else 0.0}
         return self.last
 
