@@ -49,7 +49,7 @@ def probe(fn: fem.Function, points: np.ndarray) -> np.ndarray:
     cands = geometry.compute_collisions(tree, points)
     cells = geometry.compute_colliding_cells(mesh, cands, points)
     nown = mesh.topology.index_map(mesh.topology.dim).size_local
-    vs = fn.function_space.dofmap.index_map_bs * 0 + (fn.ufl_shape[0] if fn.ufl_shape else 1)
+    vs = fn.ufl_shape[0] if fn.ufl_shape else 1
     local = np.full((len(points), vs), np.nan)
     for i in range(len(points)):
         links = cells.links(i)

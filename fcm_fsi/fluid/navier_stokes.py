@@ -28,6 +28,7 @@ from petsc4py import PETSc
 from ..config.fluid import FluidConfig
 from ..io.logging import get_logger
 from . import solvers
+from .boundary import build_bcs
 
 log = get_logger("fluid")
 
@@ -236,7 +237,6 @@ class NavierStokes:
         self.J_form = fem.form(ufl.derivative(self.residual_ufl, self.U, dU))
         self._tau_exprs = self._tau_interpolation()
 
-        from .boundary import build_bcs  # local import: boundary helpers are fluid-internal
         self.bc_set = build_bcs(self, config.boundaries, velocity_functions)
         self.bcs: list[fem.DirichletBC] = self.bc_set.bcs + list(extra_bcs)
 
