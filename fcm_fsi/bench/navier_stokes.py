@@ -1,7 +1,7 @@
 """Benchmark (not a test): cost of one stabilized Navier–Stokes nonlinear iteration in 3D.
 
-    python -m fcm_fsi.bench.navier_stokes --sizes 24 36 48 [--solver ilu|asm|hypre|lu] [--csv out.csv]
-    mpirun -n 2 python -m fcm_fsi.bench.navier_stokes --sizes 24 36 48
+    python -m fcm_fsi.bench navier_stokes --sizes 16 24 32 [--solver ilu|asm|hypre|lu]
+    mpirun -n 2 python -m fcm_fsi.bench navier_stokes --sizes 16 24 32
 
 Case: channel flow in the unit cube on an n×n×n structured tetrahedral mesh (6n³ cells),
 parabolic inflow (U = 1) at x = 0, do-nothing outflow at x = 1, no-slip elsewhere,
