@@ -41,6 +41,10 @@ def run_case(case, out: Path, comm, restart: str | None, case_dir: Path) -> None
         from .simulation.loop import TimeLoop
         from .simulation.phase_field import PhaseFieldModel
         TimeLoop(case, PhaseFieldModel(case, comm, case_dir), out, comm, restart).run()
+    elif physics == "fluid" and case.phase_field is not None:
+        from .simulation.loop import TimeLoop
+        from .simulation.two_phase import TwoPhaseModel
+        TimeLoop(case, TwoPhaseModel(case, comm, case_dir), out, comm, restart).run()
     elif physics == "dem":
         from .dem.driver import run_dem_case
         run_dem_case(case, out, comm, restart)

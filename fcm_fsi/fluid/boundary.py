@@ -34,8 +34,8 @@ def _facet_box(ns, facets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     mesh = ns.mesh
     fdim = mesh.topology.dim - 1
     gdim = mesh.geometry.dim
-    if len(facets):
-        nodes = fem.locate_dofs_topological(ns.Q, fdim, facets)
+    nodes = fem.locate_dofs_topological(ns.Q, fdim, facets)   # collective: every rank calls it
+    if len(nodes):
         xs = ns.Q.tabulate_dof_coordinates()[nodes, :gdim]
         lo, hi = xs.min(axis=0), xs.max(axis=0)
     else:

@@ -1,0 +1,230 @@
+"""Two-phase free-surface flow: Navier–Stokes with ρ(φ), μ(φ) and a conservative Allen–Cahn φ.
+
+One time step tⁿ → tⁿ⁺¹ is three named stages (staggered, each second order on its own):
+
+1. **phase field**: φⁿ → φⁿ⁺¹ by :class:`~fcm_fsi.fluid.phase_field.PhaseField` (eq 11, 14–15),
+   advected by the extrapolated velocity u* = 3/2 uⁿ − 1/2 uⁿ⁻¹ ≈ uⁿ⁺¹ᐟ², then the optional
+   volume correction (eqs 16–17);
+2. **properties**: ρ, μ at φⁿ⁺¹ᐟ² = (φⁿ + φⁿ⁺¹)/2 by eqs 12–13 with φ clipped to [0, 1]
+   (an over/undershoot of φ must never produce a negative or super-liquid density):
+   ρ = ρ_g + (ρ_l − ρ_g) φ̂,  μ = μ_g + (μ_l − μ_g) φ̂,  φ̂ = min(max(φ, 0), 1);
+3. **navier-stokes**: uⁿ → uⁿ⁺¹, pⁿ⁺ᶿ by :class:`~fcm_fsi.fluid.navier_stokes.NavierStokes`
+   (eq 5, Crank–Nicolson) with those properties and gravity ``fluid.gravity``; the PSPG
+   test function uses the cell-mean density, ∇q/ρ̄_K (``pspg_density``): with the pointwise
+   ρ the PSPG term weights the pressure–gravity residual of an interface cell by 1/ρ_gas on
+   its gas side.
+
+Known limitation (docs/two-phase.md): P1 pressure cannot balance ρ(φ)g exactly in cells
+where ρ varies, so at rest the PSPG term leaves a spurious velocity ∝ Δt (≈ 0.5 m/s² · Δt
+for water/air on the still-water tank) that excites the tank's seiche slowly.
+
+Time-step rule (with ``run.cfl``): Δt = min(dt_max, C·h_min/max|u|) — the Courant number C
+measured with the smallest cell h_min (the refined surface band), capped by ``run.dt_max``
+(default ``run.dt``), the stated maximum.
+
+Diagnostics include the liquid level at the two vertical walls normal to x and the wetted
+length of the bottom, each from ∫φ ds over that boundary divided by its extent across the
+measured direction (parallel-safe; exact up to the exponentially small profile tails).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..config.case import Case
+from ..config.fluid import FluidConfig
+from ..fluid.navier_stokes import NavierStokes, NonlinearSolveError
+from ..fluid.phase_field import PhaseField
+from ..io.timing import StageTimer
+from ..mesh.build import build_mesh, min_cell_size
+from ..mesh.channel import tag_box_boundaries
+from .loop import SimulationDiverged, finite_or_message
+
+PHI_BOUNDS = (-0.5, 1.5)  # beyond these the phase field has blown up: stop the run
+
+
+def property_map(phi: np.ndarray, liquid: float, gas: float) -> np.ndarray:
+    """Eqs 12–13: gas + (liquid − gas)·φ̂ with φ̂ = φ clipped to [0, 1]."""
+    return gas + (liquid - gas) * np.clip(phi, 0.0, 1.0)
+
+
+def gamma_velocity_scale(case: Case) -> float:
+    """Velocity scale U of the phase-field mobility γ = mobility_factor·U [m/s].
+
+    ``phase_field.reference_velocity`` when given, else the gravity-wave speed √(|g| H)
+    of the domain height H (the largest speed a free surface reaches in a tank).
+    """
+    pf = case.phase_field
+    if pf.reference_velocity is not None:
+        return pf.reference_velocity
+    g = float(np.linalg.norm(case.fluid.gravity))
+    height = case.mesh.upper[-1] - case.mesh.lower[-1]
+    return max(np.sqrt(g * height), 1e-12)
+
+
+def interface_cell_size(case: Case, h_min: float) -> float:
+    """Cell size h of the interface width ε = width_factor·h [m]: the smallest refine-zone size
+    of a gmsh mesh (the surface band; gmsh also makes a few smaller cells at corners, which
+    would give an ε the band cannot resolve), else the smallest cell size of the mesh."""
+    zones = case.mesh.refine if case.mesh.kind == "gmsh_box" else ()
+    return min(z.size for z in zones) if zones else h_min
+
+
+class TwoPhaseModel:
+    """Navier–Stokes + phase field on one mesh; the model protocol of :mod:`.loop`."""
+
+    series_units = {"volume": "m^d", "volume_error": "-", "mass_drift": "-", "u_max": "m/s", "cfl": "-",
+                    "level_left": "m", "level_right": "m", "wetted_bottom": "m", "p_bottom": "Pa",
+                    "kinetic_energy": "J (J/m in 2D)", "phi_min": "-", "phi_max": "-",
+                    "ns_iterations": "-", "pf_iterations": "-"}
+
+    def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None):
+        self.case = case
+        self.mesh = build_mesh(case.mesh, comm, case_dir)
+        self.gdim = self.mesh.geometry.dim
+        tagged = tag_box_boundaries(self.mesh, case.mesh.lower, case.mesh.upper)
+        self.h_min = min_cell_size(self.mesh)
+        fl: FluidConfig = case.fluid
+        S = fem.FunctionSpace(self.mesh, ("Lagrange", 1))
+        self.rho = fem.Function(S, name="rho")
+        self.mu = fem.Function(S, name="mu")
+        self.rho_cell = fem.Function(fem.FunctionSpace(self.mesh, ("DG", 0)), name="rho_cell")
+        self.ns = NavierStokes(self.mesh, fl, case.run.dt, facet_tags=tagged.facet_tags,
+                               boundary_names=tagged.names, rho=self.rho, mu=self.mu,
+                               pspg_density=self.rho_cell)
+        self.u_adv = fem.Function(self.ns.V, name="u_advect")   # velocity seen by φ
+        self.h_interface = interface_cell_size(case, self.h_min)
+        self.pf = PhaseField(self.mesh, case.phase_field, self.h_interface, self.u_adv,
+                             gamma_velocity_scale(case), case.run.dt)
+        self.pf.set_initial(case.phase_field.initial)
+        self.update_properties(self.pf.phi.x.array)
+        self.u_out = fem.Function(self.ns.V, name="u")
+        self.p_out = fem.Function(self.ns.Q, name="p")
+        self.output_functions = [self.pf.phi, self.u_out, self.p_out, self.rho]
+        self.last_dt = case.run.dt
+        self.ns_iterations = self.pf_iterations = 0
+        self._boundary_forms(tagged)
+
+    # ------------------------------------------------------------------ set-up
+    def _boundary_forms(self, tagged) -> None:
+        """∫φ ds and ∫p ds on the walls, with the divisors that turn them into lengths/means."""
+        ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=tagged.facet_tags,
+                         metadata={"quadrature_degree": 2})
+        _, p = ufl.split(self.ns.U)
+        lo, hi = np.array(self.case.mesh.lower), np.array(self.case.mesh.upper)
+        one = fem.Constant(self.mesh, PETSc.ScalarType(1.0))
+        comm = self.mesh.comm
+
+        def measure(name):
+            return comm.allreduce(fem.assemble_scalar(fem.form(one * ds(tagged.names[name]))), op=MPI.SUM)
+        vertical = hi[-1] - lo[-1]
+        self._phi_forms = {"level_left": (fem.form(self.pf.phi * ds(tagged.names["left"])), measure("left") / vertical),
+                           "level_right": (fem.form(self.pf.phi * ds(tagged.names["right"])), measure("right") / vertical),
+                           "wetted_bottom": (fem.form(self.pf.phi * ds(tagged.names["bottom"])),
+                                             measure("bottom") / (hi[0] - lo[0]))}
+        self._p_bottom = (fem.form(p * ds(tagged.names["bottom"])), measure("bottom"))
+        u, _ = ufl.split(self.ns.U)
+        dx = ufl.Measure("dx", domain=self.mesh, metadata={"quadrature_degree": 3})
+        self._kinetic = fem.form(0.5 * self.rho * ufl.inner(u, u) * dx)
+
+    def update_properties(self, phi_values: np.ndarray) -> None:
+        """ρ, μ from φ (eqs 12–13, clipped) at the nodes."""
+        fl = self.case.fluid
+        self.rho.x.array[:] = property_map(phi_values, fl.density, fl.gas_density)
+        self.mu.x.array[:] = property_map(phi_values, fl.viscosity, fl.gas_viscosity)
+        self.rho_cell.interpolate(self.rho)   # cell mean of the P1 ρ (midpoint value)
+
+    # -------------------------------------------------------------- time step
+    def advance(self, t: float, dt: float, timer: StageTimer) -> None:
+        ns, pf = self.ns, self.pf
+        vm = ns.V_map
+        with timer("phase field"):
+            first = ns.step_count == 0
+            u_n = ns.U.x.array[vm]
+            self.u_adv.x.array[:] = u_n if first else 1.5 * u_n - 0.5 * ns.U_n.x.array[vm]
+            phi_old = pf.phi.x.array.copy()
+            self.pf_iterations = pf.advance(dt)
+        with timer("properties"):
+            self.update_properties(0.5 * (phi_old + pf.phi.x.array))
+        with timer("navier-stokes"):
+            ns.dt.value = dt
+            try:
+                info = ns.step()
+            except NonlinearSolveError as err:
+                raise SimulationDiverged(str(err)) from err
+            self.ns_iterations = info.iterations
+        self.u_out.x.array[:] = ns.U.x.array[vm]
+        self.p_out.x.array[:] = ns.U.x.array[ns.Q_map]
+        self.last_dt = dt
+
+    def speed_max(self) -> float:
+        u = self.ns.U.x.array[self.ns.V_map].reshape(-1, self.gdim)
+        local = float(np.sqrt((u ** 2).sum(axis=1)).max(initial=0.0))
+        return self.mesh.comm.allreduce(local, op=MPI.MAX)
+
+    def stable_dt(self, cfl: float) -> float:
+        """Δt = C·h_min/max|u| (inf at rest; the loop caps it with run.dt_max)."""
+        umax = self.speed_max()
+        return cfl * self.h_min / umax if umax > 0 else np.inf
+
+    # ------------------------------------------------------------ diagnostics
+    def diagnostics(self) -> dict[str, float]:
+        comm = self.mesh.comm
+        pf = self.pf
+        volume, _ = pf.volume()
+        mass = pf.mass()
+        umax = self.speed_max()
+        phi = pf.phi.x.array
+        diag = {"volume": volume, "volume_error": (volume - pf.volume0) / pf.volume0,
+                "mass_drift": (mass - pf.mass0) / pf.mass0, "u_max": umax,
+                "cfl": umax * self.last_dt / self.h_min}
+        for key, (form, divisor) in self._phi_forms.items():
+            diag[key] = comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM) / divisor
+        form, length = self._p_bottom
+        diag["p_bottom"] = comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM) / length
+        diag["kinetic_energy"] = comm.allreduce(fem.assemble_scalar(self._kinetic), op=MPI.SUM)
+        diag["phi_min"] = comm.allreduce(float(phi.min(initial=np.inf)), op=MPI.MIN)
+        diag["phi_max"] = comm.allreduce(float(phi.max(initial=-np.inf)), op=MPI.MAX)
+        diag["ns_iterations"] = float(self.ns_iterations)
+        diag["pf_iterations"] = float(self.pf_iterations)
+        return diag
+
+    def health(self, diag: dict[str, float]) -> str | None:
+        problem = finite_or_message(diag)
+        if problem is None and not PHI_BOUNDS[0] <= diag["phi_min"] <= diag["phi_max"] <= PHI_BOUNDS[1]:
+            problem = f"φ left [{PHI_BOUNDS[0]}, {PHI_BOUNDS[1]}]: min {diag['phi_min']:.3g}, max {diag['phi_max']:.3g}"
+        return problem
+
+    # ------------------------------------------------------------- checkpoint
+    def state(self):
+        fields, globals_ = self.pf.state()
+        ns = self.ns
+        nv = ns.V.dofmap.index_map.size_local
+        xv = ns.V.tabulate_dof_coordinates()[:nv]
+        for name, arr in (("U", ns.U), ("U_n", ns.U_n)):
+            fields[f"{name}_u"] = (xv, arr.x.array[ns.V_map].reshape(-1, self.gdim)[:nv].copy())
+            nq = ns.Q.dofmap.index_map.size_local
+            fields[f"{name}_p"] = (ns.Q.tabulate_dof_coordinates()[:nq], arr.x.array[ns.Q_map][:nq].copy())
+        fields["u_nm1"] = (xv, ns.u_nm1.x.array.reshape(-1, self.gdim)[:nv].copy())
+        globals_["two_phase_scalars"] = np.array([ns.t, float(ns.step_count)])
+        return fields, globals_
+
+    def load_state(self, checkpoint) -> None:
+        from ..io.checkpoint import nodal_values_at
+        self.pf.load_state(checkpoint)
+        ns = self.ns
+        xv, xq = ns.V.tabulate_dof_coordinates(), ns.Q.tabulate_dof_coordinates()
+        for name, arr in (("U", ns.U), ("U_n", ns.U_n)):
+            arr.x.array[ns.V_map] = nodal_values_at(xv, checkpoint.fields[f"{name}_u"], f"{name}_u").ravel()
+            arr.x.array[ns.Q_map] = nodal_values_at(xq, checkpoint.fields[f"{name}_p"], f"{name}_p")
+        ns.u_nm1.x.array[:] = nodal_values_at(xv, checkpoint.fields["u_nm1"], "u_nm1").ravel()
+        t, steps = checkpoint.globals["two_phase_scalars"]
+        ns.t, ns.step_count = float(t), int(steps)
+        self.update_properties(self.pf.phi.x.array)
+        self.u_out.x.array[:] = ns.U.x.array[ns.V_map]
+        self.p_out.x.array[:] = ns.U.x.array[ns.Q_map]
