@@ -7,6 +7,7 @@ from typing import Literal
 
 from .fields import param
 from .loader import ConfigError
+from .structure import CohesiveConfig, StructureConfig
 
 Vec3 = tuple[float, float, float]
 DofMode = Literal["free", "force", "velocity", "displacement"]
@@ -129,6 +130,8 @@ class DEMConfig:
     generators: tuple[GeneratorConfig, ...] = param((), doc="generated blocks (appended after blocks)")
     walls: tuple[WallConfig, ...] = param((), doc="static walls")
     controls: tuple[ControlConfig, ...] = param((), doc="controlled blocks")
+    structure: StructureConfig | None = param(None, doc="a bonded-block building from the structure builder (its blocks follow blocks and generators)")
+    cohesive: CohesiveConfig | None = param(None, doc="cohesive law of the bonds between the structure's blocks (required with structure)")
     ledger_every: int = param(100, unit="steps", doc="energy-ledger and force–displacement CSV row every this many DEM steps", ge=1)
 
     def __post_init__(self) -> None:
@@ -140,11 +143,15 @@ class DEMConfig:
         used = [(f"dem.blocks[{i}].material", b.material) for i, b in enumerate(self.blocks)]
         used += [(f"dem.generators[{i}].block.material", g.block.material) for i, g in enumerate(self.generators)]
         used += [(f"dem.walls[{i}].material", w.material) for i, w in enumerate(self.walls)]
+        if self.structure is not None:
+            used.append(("dem.structure.material", self.structure.material))
+            if self.cohesive is None:
+                raise ConfigError("key 'dem.cohesive' is required when dem.structure is given")
         for key, name in used:
             if name not in names:
                 raise ConfigError(f"key '{key}' = {name!r} is not a defined material ({', '.join(names)})")
         nblocks = len(self.blocks) + sum(g.count for g in self.generators)
-        if nblocks == 0:
+        if nblocks == 0 and self.structure is None:
             raise ConfigError("key 'dem.blocks' / 'dem.generators': the case has no blocks")
         for i, c in enumerate(self.controls):
             if c.block >= nblocks:

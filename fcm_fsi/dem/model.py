@@ -60,8 +60,17 @@ def _qmul(p, q):
     return np.concatenate([[w1 * w2 - v1 @ v2], w1 * v2 + w2 * v1 + np.cross(v1, v2)])
 
 
-def build_state(cfg: DEMConfig) -> DEMState:
-    """All blocks (cfg.blocks, then generated) as a DEMState."""
+def build_structure(cfg: DEMConfig):
+    """The bonded building of ``dem.structure`` (None when absent)."""
+    if cfg.structure is None:
+        return None
+    from .builder import build_building
+    k = cfg.material_index(cfg.structure.material)
+    return build_building(cfg.structure, k, cfg.materials[k].density)
+
+
+def build_state(cfg: DEMConfig, structure=None) -> DEMState:
+    """All blocks (cfg.blocks, then generated, then the structure's) as a DEMState."""
     pos, quat, mass, inertia, vel, omega, fixed = [], [], [], [], [], [], []
     sb, sl, sr, sm = [], [], [], []
 
@@ -95,6 +104,19 @@ def build_state(cfg: DEMConfig) -> DEMState:
         P, Q = _generated(g, tmpl)
         for p, q in zip(P, Q):
             add(tmpl, g.block, p, q, p_is_com=True)
+    if structure is not None:
+        first = len(pos)
+        pos.extend(structure.pos)
+        quat.extend(structure.quat)
+        mass.extend(structure.mass)
+        inertia.extend(structure.inertia)
+        vel.extend(np.zeros((structure.nb, 3)))
+        omega.extend(np.zeros((structure.nb, 3)))
+        fixed.extend([False] * structure.nb)
+        sb.extend(structure.sph_block + first)
+        sl.extend(structure.sph_local)
+        sr.extend(structure.sph_radius)
+        sm.extend(structure.sph_material)
     return DEMState.from_blocks(pos, quat, mass, inertia, sb, sl, sr, sm, vel=vel, omega=omega, fixed=fixed)
 
 
@@ -137,19 +159,35 @@ def walls_of(cfg: DEMConfig, mats: Materials, ns: int, clip: bool) -> WallContac
 
 def build_system(cfg: DEMConfig, with_ledger: bool = True) -> DEMSystem:
     """Blocks, contact, walls, controls; refuses dt > dt_safety·Δt_cr (ConfigError)."""
-    state = build_state(cfg)
+    structure = build_structure(cfg)
+    state = build_state(cfg, structure)
     mats = materials_of(cfg)
     skin = cfg.skin if cfg.skin is not None else 0.3 * float(state.sph_radius.min())
     inter = [SphereContact(mats, skin, cfg.clip_normal)]
     walls = walls_of(cfg, mats, state.ns, cfg.clip_normal)
     if walls is not None:
         inter.append(walls)
+    if structure is not None:
+        inter.append(structure_bonds(cfg, structure, first_block=state.nb - structure.nb))
     controls = None
     if cfg.controls:
         controls = Controls([Control(c.block, tuple(c.modes), tuple(c.values), c.ramp) for c in cfg.controls], state)
     system = DEMSystem(state, inter, cfg.dt, cfg.gravity, controls, with_ledger)
     check_time_step(system, cfg.dt_safety)
     return system
+
+
+def structure_bonds(cfg: DEMConfig, structure, first_block: int):
+    """Cohesive bonds on the structure's shared faces, block indices shifted to the state's."""
+    import dataclasses
+    from .cohesive import CohesiveBonds, CohesiveLaw
+    faces = [dataclasses.replace(f, a=f.a + first_block, b=f.b + first_block) for f in structure.faces]
+    pos = np.zeros((first_block + structure.nb, 3))
+    pos[first_block:] = structure.pos
+    quat = np.zeros((first_block + structure.nb, 4))
+    quat[:, 0] = 1.0
+    return CohesiveBonds.from_faces(CohesiveLaw.from_config(cfg.cohesive), faces, pos, quat,
+                                    cfg.cohesive.points_per_edge)
 
 
 def check_time_step(system: DEMSystem, safety: float) -> float:
