@@ -23,7 +23,8 @@ measured with the smallest cell h_min (the refined surface band), capped by ``ru
 (default ``run.dt``), the stated maximum.
 
 Diagnostics include the liquid level at the two vertical walls normal to x and the wetted
-length of the bottom, each from ∫φ ds over that boundary divided by its extent across the
+length of the bottom (the plane normal to the last axis: ``bottom`` in 2D, ``front`` (z = z_min)
+in 3D, after the mesh's boundary names), each from ∫φ ds over that boundary divided by its extent across the
 measured direction (parallel-safe; exact up to the exponentially small profile tails).
 """
 from __future__ import annotations
@@ -123,11 +124,12 @@ class TwoPhaseModel:
         def measure(name):
             return comm.allreduce(fem.assemble_scalar(fem.form(one * ds(tagged.names[name]))), op=MPI.SUM)
         vertical = hi[-1] - lo[-1]
+        bottom = "bottom" if self.gdim == 2 else "front"   # the plane normal to the last (vertical) axis
         self._phi_forms = {"level_left": (fem.form(self.pf.phi * ds(tagged.names["left"])), measure("left") / vertical),
                            "level_right": (fem.form(self.pf.phi * ds(tagged.names["right"])), measure("right") / vertical),
-                           "wetted_bottom": (fem.form(self.pf.phi * ds(tagged.names["bottom"])),
-                                             measure("bottom") / (hi[0] - lo[0]))}
-        self._p_bottom = (fem.form(p * ds(tagged.names["bottom"])), measure("bottom"))
+                           "wetted_bottom": (fem.form(self.pf.phi * ds(tagged.names[bottom])),
+                                             measure(bottom) / (hi[0] - lo[0]))}
+        self._p_bottom = (fem.form(p * ds(tagged.names[bottom])), measure(bottom))
         u, _ = ufl.split(self.ns.U)
         dx = ufl.Measure("dx", domain=self.mesh, metadata={"quadrature_degree": 3})
         self._kinetic = fem.form(0.5 * self.rho * ufl.inner(u, u) * dx)
