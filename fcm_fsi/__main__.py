@@ -45,6 +45,10 @@ def run_case(case, out: Path, comm, restart: str | None, case_dir: Path) -> None
         from .simulation.loop import TimeLoop
         from .simulation.two_phase import TwoPhaseModel
         TimeLoop(case, TwoPhaseModel(case, comm, case_dir), out, comm, restart).run()
+    elif physics == "fluid":
+        from .simulation.fluid import FluidModel
+        from .simulation.loop import TimeLoop
+        TimeLoop(case, FluidModel(case, comm, case_dir), out, comm, restart).run()
     elif physics == "dem":
         from .dem.driver import run_dem_case
         run_dem_case(case, out, comm, restart)

@@ -64,3 +64,20 @@ def test_one_and_two_ranks_agree(tmp_path):
     s1 = np.genfromtxt(tmp_path / "r1" / "series.csv", delimiter=",", skip_header=1)
     s2 = np.genfromtxt(tmp_path / "r2" / "series.csv", delimiter=",", skip_header=1)
     np.testing.assert_allclose(s1[:, :-1], s2[:, :-1], rtol=1e-9, atol=1e-12)
+
+
+def test_single_phase_fluid_case_runs_and_restarts(tmp_path, root):
+    """cases/cavity_re100.yaml through the CLI: 2 steps = 1 step + restart + 1 step."""
+    case = str(root / "cases" / "cavity_re100.yaml")
+    small = ["--set", "mesh.cells=[16,16]"]
+    full = run_cli([case, "--output", str(tmp_path / "full"), "--set", "run.t_end=4.0", *small])
+    assert full.returncode == 0, full.stderr
+    half = run_cli([case, "--output", str(tmp_path / "half"), "--set", "run.t_end=2.0", *small])
+    assert half.returncode == 0, half.stderr
+    resumed = run_cli([case, "--output", str(tmp_path / "half"), "--set", "run.t_end=4.0", *small,
+                       "--restart", str(tmp_path / "half" / "checkpoint.h5")])
+    assert resumed.returncode == 0, resumed.stderr
+    a = np.genfromtxt(tmp_path / "full" / "series.csv", delimiter=",", skip_header=1)
+    b = np.genfromtxt(tmp_path / "half" / "series.csv", delimiter=",", skip_header=1)
+    assert a.shape == b.shape == (3, 7)
+    np.testing.assert_allclose(a[-1, :6], b[-1, :6], rtol=1e-10)

@@ -44,6 +44,7 @@ from ..fluid.phase_field import PhaseField
 from ..io.timing import StageTimer
 from ..mesh.build import build_mesh, min_cell_size
 from ..mesh.channel import tag_box_boundaries
+from .fluid import ns_load_state, ns_state
 from .loop import SimulationDiverged, finite_or_message
 
 PHI_BOUNDS = (-0.5, 1.5)  # beyond these the phase field has blown up: stop the run
@@ -205,26 +206,14 @@ class TwoPhaseModel:
     # ------------------------------------------------------------- checkpoint
     def state(self):
         fields, globals_ = self.pf.state()
-        ns = self.ns
-        nv = ns.V.dofmap.index_map.size_local
-        xv = ns.V.tabulate_dof_coordinates()[:nv]
-        for name, arr in (("U", ns.U), ("U_n", ns.U_n)):
-            fields[f"{name}_u"] = (xv, arr.x.array[ns.V_map].reshape(-1, self.gdim)[:nv].copy())
-            nq = ns.Q.dofmap.index_map.size_local
-            fields[f"{name}_p"] = (ns.Q.tabulate_dof_coordinates()[:nq], arr.x.array[ns.Q_map][:nq].copy())
-        fields["u_nm1"] = (xv, ns.u_nm1.x.array.reshape(-1, self.gdim)[:nv].copy())
-        globals_["two_phase_scalars"] = np.array([ns.t, float(ns.step_count)])
+        fields.update(ns_state(self.ns, self.gdim))
+        globals_["two_phase_scalars"] = np.array([self.ns.t, float(self.ns.step_count)])
         return fields, globals_
 
     def load_state(self, checkpoint) -> None:
-        from ..io.checkpoint import nodal_values_at
         self.pf.load_state(checkpoint)
+        ns_load_state(self.ns, checkpoint)
         ns = self.ns
-        xv, xq = ns.V.tabulate_dof_coordinates(), ns.Q.tabulate_dof_coordinates()
-        for name, arr in (("U", ns.U), ("U_n", ns.U_n)):
-            arr.x.array[ns.V_map] = nodal_values_at(xv, checkpoint.fields[f"{name}_u"], f"{name}_u").ravel()
-            arr.x.array[ns.Q_map] = nodal_values_at(xq, checkpoint.fields[f"{name}_p"], f"{name}_p")
-        ns.u_nm1.x.array[:] = nodal_values_at(xv, checkpoint.fields["u_nm1"], "u_nm1").ravel()
         t, steps = checkpoint.globals["two_phase_scalars"]
         ns.t, ns.step_count = float(t), int(steps)
         self.update_properties(self.pf.phi.x.array)

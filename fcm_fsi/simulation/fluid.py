@@ -1,0 +1,98 @@
+"""Single-phase Navier–Stokes run by the CLI (e.g. cases/cavity_re100.yaml), and the
+Navier–Stokes checkpoint helpers shared with the two-phase model."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from ..config.case import Case
+from ..fluid.navier_stokes import NavierStokes, NonlinearSolveError
+from ..io.timing import StageTimer
+from ..mesh.build import build_mesh, min_cell_size
+from ..mesh.channel import tag_box_boundaries
+from .loop import SimulationDiverged, finite_or_message
+
+
+def ns_state(ns: NavierStokes, gdim: int) -> dict:
+    """Owned nodal (coords, values) of U, Uⁿ (velocity and pressure) and uⁿ⁻¹."""
+    nv, nq = ns.V.dofmap.index_map.size_local, ns.Q.dofmap.index_map.size_local
+    xv, xq = ns.V.tabulate_dof_coordinates()[:nv], ns.Q.tabulate_dof_coordinates()[:nq]
+    fields = {}
+    for name, arr in (("U", ns.U), ("U_n", ns.U_n)):
+        fields[f"{name}_u"] = (xv, arr.x.array[ns.V_map].reshape(-1, gdim)[:nv].copy())
+        fields[f"{name}_p"] = (xq, arr.x.array[ns.Q_map][:nq].copy())
+    fields["u_nm1"] = (xv, ns.u_nm1.x.array.reshape(-1, gdim)[:nv].copy())
+    return fields
+
+
+def ns_load_state(ns: NavierStokes, checkpoint) -> None:
+    """Inverse of :func:`ns_state` (nodes matched by coordinates)."""
+    from ..io.checkpoint import nodal_values_at
+    xv, xq = ns.V.tabulate_dof_coordinates(), ns.Q.tabulate_dof_coordinates()
+    for name, arr in (("U", ns.U), ("U_n", ns.U_n)):
+        arr.x.array[ns.V_map] = nodal_values_at(xv, checkpoint.fields[f"{name}_u"], f"{name}_u").ravel()
+        arr.x.array[ns.Q_map] = nodal_values_at(xq, checkpoint.fields[f"{name}_p"], f"{name}_p")
+    ns.u_nm1.x.array[:] = nodal_values_at(xv, checkpoint.fields["u_nm1"], "u_nm1").ravel()
+
+
+def max_speed(ns: NavierStokes, gdim: int, comm: MPI.Comm) -> float:
+    """max |u| over the mesh [m/s] (collective)."""
+    u = ns.U.x.array[ns.V_map].reshape(-1, gdim)
+    return comm.allreduce(float(np.sqrt((u ** 2).sum(axis=1)).max(initial=0.0)), op=MPI.MAX)
+
+
+class FluidModel:
+    """Incompressible single-phase flow on a rectangle/box whose sides are named
+    left/right/bottom/top(/front/back) in ``fluid.boundaries``."""
+
+    series_units = {"u_max": "m/s", "cfl": "-", "divergence_l2": "1/s", "ns_iterations": "-"}
+
+    def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None):
+        self.mesh = build_mesh(case.mesh, comm, case_dir)
+        self.gdim = self.mesh.geometry.dim
+        self.h_min = min_cell_size(self.mesh)
+        tagged = tag_box_boundaries(self.mesh, case.mesh.lower, case.mesh.upper)
+        self.ns = NavierStokes(self.mesh, case.fluid, case.run.dt, facet_tags=tagged.facet_tags,
+                               boundary_names=tagged.names)
+        self.u_out = self.ns.U.sub(0).collapse()
+        self.u_out.name = "u"
+        self.p_out = self.ns.U.sub(1).collapse()
+        self.p_out.name = "p"
+        self.output_functions = [self.u_out, self.p_out]
+        self.last_dt = case.run.dt
+        self.iterations = 0
+
+    def advance(self, t: float, dt: float, timer: StageTimer) -> None:
+        with timer("navier-stokes"):
+            self.ns.dt.value = dt
+            try:
+                self.iterations = self.ns.step().iterations
+            except NonlinearSolveError as err:
+                raise SimulationDiverged(str(err)) from err
+        self.u_out.x.array[:] = self.ns.U.x.array[self.ns.V_map]
+        self.p_out.x.array[:] = self.ns.U.x.array[self.ns.Q_map]
+        self.last_dt = dt
+
+    def stable_dt(self, cfl: float) -> float:
+        umax = max_speed(self.ns, self.gdim, self.mesh.comm)
+        return cfl * self.h_min / umax if umax > 0 else np.inf
+
+    def diagnostics(self) -> dict[str, float]:
+        umax = max_speed(self.ns, self.gdim, self.mesh.comm)
+        return {"u_max": umax, "cfl": umax * self.last_dt / self.h_min,
+                "divergence_l2": self.ns.divergence_l2(), "ns_iterations": float(self.iterations)}
+
+    def health(self, diag: dict[str, float]) -> str | None:
+        return finite_or_message(diag)
+
+    def state(self):
+        return ns_state(self.ns, self.gdim), {"fluid_scalars": np.array([self.ns.t, float(self.ns.step_count)])}
+
+    def load_state(self, checkpoint) -> None:
+        ns_load_state(self.ns, checkpoint)
+        t, steps = checkpoint.globals["fluid_scalars"]
+        self.ns.t, self.ns.step_count = float(t), int(steps)
+        self.u_out.x.array[:] = self.ns.U.x.array[self.ns.V_map]
+        self.p_out.x.array[:] = self.ns.U.x.array[self.ns.Q_map]
