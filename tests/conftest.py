@@ -30,3 +30,14 @@ def run_cli(args: list[str], np_: int = 1, cwd: Path = ROOT, timeout: float = 60
 @pytest.fixture
 def root() -> Path:
     return ROOT
+
+
+@pytest.fixture
+def one_numba_thread():
+    """Pin Numba kernels to one thread (the 2 cores are shared; DEM results do not depend on
+    it, see test_result_does_not_depend_on_thread_count)."""
+    import numba
+    old = numba.get_num_threads()
+    numba.set_num_threads(1)
+    yield
+    numba.set_num_threads(old)

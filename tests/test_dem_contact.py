@@ -10,15 +10,7 @@ from fcm_fsi.dem.system import critical_time_step
 from fcm_fsi.verify.cases.dem import _measure_restitution, _slide
 
 
-@pytest.fixture(autouse=True)
-def _one_numba_thread():
-    """Pin the kernels to one thread (the 2 cores are shared; results do not depend on it,
-    see test_result_does_not_depend_on_thread_count)."""
-    import numba
-    old = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(old)
+pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
 
 def ode_restitution(h: float, clip: bool) -> float:

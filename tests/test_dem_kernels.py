@@ -10,15 +10,7 @@ from fcm_fsi.dem.neighbours import build_pairs, build_pairs_ref, carry_history, 
 from fcm_fsi.dem.state import DEMState
 
 
-@pytest.fixture(autouse=True)
-def _one_numba_thread():
-    """Pin the kernels to one thread (the 2 cores are shared; results do not depend on it,
-    see test_result_does_not_depend_on_thread_count)."""
-    import numba
-    old = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(old)
+pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
 
 def random_state(nb=40, per=3, seed=1, box=0.08):

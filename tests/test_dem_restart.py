@@ -9,15 +9,7 @@ from fcm_fsi.dem.driver import run_dem_case
 from fcm_fsi.verify.cases.dem import repose_config
 
 
-@pytest.fixture(autouse=True)
-def _one_numba_thread():
-    """Pin the kernels to one thread (the 2 cores are shared; results do not depend on it,
-    see test_result_does_not_depend_on_thread_count)."""
-    import numba
-    old = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(old)
+pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
 
 def case(t_end):

@@ -11,15 +11,7 @@ from mpi4py import MPI
 from fcm_fsi.verify.registry import load_all
 
 
-@pytest.fixture(autouse=True)
-def _one_numba_thread():
-    """Pin the kernels to one thread (the 2 cores are shared; results do not depend on it,
-    see test_result_does_not_depend_on_thread_count)."""
-    import numba
-    old = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(old)
+pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
 
 KNOWN_MISS = {("bounce", "energy_balance_error")}

@@ -16,6 +16,14 @@ from .loop import finite_or_message
 PHI_BOUNDS = (-0.5, 1.5)  # beyond these the field has blown up: stop the run
 
 
+def phase_field_health(diag: dict[str, float]) -> str | None:
+    """Why a step with these diagnostics must stop (non-finite, φ out of bounds), or None."""
+    problem = finite_or_message(diag)
+    if problem is None and not PHI_BOUNDS[0] <= diag["phi_min"] <= diag["phi_max"] <= PHI_BOUNDS[1]:
+        problem = f"φ left [{PHI_BOUNDS[0]}, {PHI_BOUNDS[1]}]: min {diag['phi_min']:.3g}, max {diag['phi_max']:.3g}"
+    return problem
+
+
 class PhaseFieldModel:
     """Mesh + prescribed velocity + φ; diagnostics are the case-health numbers."""
 
@@ -53,10 +61,7 @@ class PhaseFieldModel:
                 "newton_iterations": float(self.iterations)}
 
     def health(self, diag: dict[str, float]) -> str | None:
-        problem = finite_or_message(diag)
-        if problem is None and not PHI_BOUNDS[0] <= diag["phi_min"] <= diag["phi_max"] <= PHI_BOUNDS[1]:
-            problem = f"φ left [{PHI_BOUNDS[0]}, {PHI_BOUNDS[1]}]: min {diag['phi_min']:.3g}, max {diag['phi_max']:.3g}"
-        return problem
+        return phase_field_health(diag)
 
     def state(self):
         return self.pf.state()

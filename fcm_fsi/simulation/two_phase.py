@@ -45,9 +45,9 @@ from ..io.timing import StageTimer
 from ..mesh.build import build_mesh, min_cell_size
 from ..mesh.channel import tag_box_boundaries
 from .fluid import ns_load_state, ns_state
-from .loop import SimulationDiverged, finite_or_message
+from .loop import SimulationDiverged
+from .phase_field import phase_field_health
 
-PHI_BOUNDS = (-0.5, 1.5)  # beyond these the phase field has blown up: stop the run
 
 
 def property_map(phi: np.ndarray, liquid: float, gas: float) -> np.ndarray:
@@ -198,10 +198,7 @@ class TwoPhaseModel:
         return diag
 
     def health(self, diag: dict[str, float]) -> str | None:
-        problem = finite_or_message(diag)
-        if problem is None and not PHI_BOUNDS[0] <= diag["phi_min"] <= diag["phi_max"] <= PHI_BOUNDS[1]:
-            problem = f"φ left [{PHI_BOUNDS[0]}, {PHI_BOUNDS[1]}]: min {diag['phi_min']:.3g}, max {diag['phi_max']:.3g}"
-        return problem
+        return phase_field_health(diag)
 
     # ------------------------------------------------------------- checkpoint
     def state(self):
