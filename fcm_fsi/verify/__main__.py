@@ -3,6 +3,7 @@
     python -m fcm_fsi.verify NAME --level quick|full [--np N] [--out DIR]
     python -m fcm_fsi.verify --list
     python -m fcm_fsi.verify all --level full --report docs/verification
+    python -m fcm_fsi.verify --out verification --report docs/verification   (report only)
 
 Writes DIR/NAME/metrics.json and PNG plots, prints a table, exits 1 when a metric fails.
 """
@@ -119,6 +120,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     setup_logging("WARNING")
     cases = load_all()
+    if args.report is not None and not args.name:   # report of what is already under --out
+        write_report(args.out, args.report)
+        return 0
     if args.list or not args.name:
         for name in sorted(cases):
             c = cases[name]
