@@ -15,11 +15,18 @@ CASE = {"name": "restart", "run": {"t_end": 0.4, "dt": 0.02, "checkpoint_every":
                         "velocity": {"kind": "rotation"}}}
 
 
-def final_phi(path) -> np.ndarray:
-    """φ ordered by node coordinates (the partition may differ between runs)."""
+def final_phi(path) -> tuple[np.ndarray, np.ndarray]:
+    """(node coordinates, φ) of a checkpoint; the node order depends on the partition."""
     with h5py.File(path, "r") as f:
-        x, v = f["fields/phi/coords"][...], f["fields/phi/values"][...]
-    return v[np.lexsort(x.T[::-1])]
+        return f["fields/phi/coords"][...], f["fields/phi/values"][...]
+
+
+def max_difference(a, b) -> float:
+    """max |φ_a − φ_b| over nodes matched by coordinates (they agree to ~1e-16 m)."""
+    from scipy.spatial import cKDTree
+    dist, idx = cKDTree(b[0]).query(a[0])
+    assert dist.max() < 1e-12
+    return float(np.abs(a[1] - b[1][idx]).max())
 
 
 @pytest.mark.parametrize("np_", [1, pytest.param(2, marks=pytest.mark.mpi)])
@@ -34,7 +41,9 @@ def test_restart_reproduces_uninterrupted_run(tmp_path, np_):
                        str(tmp_path / "half" / "checkpoint.h5")], np_)
     assert resumed.returncode == 0, resumed.stderr
     a, b = final_phi(tmp_path / "full" / "checkpoint.h5"), final_phi(tmp_path / "half" / "checkpoint.h5")
-    assert np.max(np.abs(a - b)) < 1e-12
+    # φ is solved by GMRES to rtol 1e-12 with a partition-dependent block-Jacobi/ILU
+    # preconditioner (the partition of a new run may differ): agreement to solver tolerance
+    assert max_difference(a, b) < 1e-10
     series = np.genfromtxt(tmp_path / "half" / "series.csv", delimiter=",", skip_header=1)
     assert series.shape[0] == 21  # t = 0 plus 20 steps, continued across the restart
     assert (tmp_path / "full" / "fields.xdmf").exists() and (tmp_path / "full" / "case.resolved.yaml").exists()
