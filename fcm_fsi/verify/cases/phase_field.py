@@ -47,7 +47,6 @@ def rotation_case(cells: int, revs: int, form: str, correction: bool, shape: dic
 def run_rotation(data: dict, out: Path, comm: MPI.Comm) -> tuple[PhaseFieldModel, dict, np.ndarray]:
     """Run a rotation case; returns the model, final diagnostics and φ at t = 0."""
     case = case_from_dict(data, source=data["name"])
-    # dt is set by the CFL rule; run.dt only caps it — make the cap inactive.
     model = PhaseFieldModel(case, comm)
     phi0 = model.pf.phi.x.array.copy()
     sub = out / data["name"]
@@ -132,12 +131,12 @@ def rotating_cylinder(level: str, out: Path, comm: MPI.Comm) -> list[Metric]:
     long = rotation_case(p["cells"], p["revs"], "conservative", False, circle, **geom)
     long["name"] = "rotation_conservative_long"
     if p["revs"] > 1:
-        consN, diagN, _ = run_rotation(long, out, comm)
+        _, diagN, _ = run_rotation(long, out, comm)
         runs[f"conservative, {p['revs']} rev"] = out / long["name"]
     else:
         diagN = diag1
     corr = rotation_case(p["cells"], p["revs"], "conservative", True, circle, **geom)
-    corrN, diag_c, _ = run_rotation(corr, out, comm)
+    _, diag_c, _ = run_rotation(corr, out, comm)
     runs[f"conservative + correction, {p['revs']} rev"] = out / corr["name"]
     if comm.rank == 0:
         plot_rotation(out, runs, finals, initial)
