@@ -407,6 +407,40 @@ def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omeg
 
 
 # ---------------------------------------------------------------- NumPy reference
+def _law_ref(delta, n, un, ut, hist, k, kt, c, ct, mu, clip, dt):
+    """NumPy reference of the contact law (eqs 18–20 + slider) for one batch of contacts:
+    relative contact velocity split into un, ut; ``hist`` rows = (tangential spring
+    elongation (3), previous dashpot normal force, previous tangential dashpot force (3)).
+    Returns (force on the first body, spring energy, dashpot work, friction work, new history)."""
+    FN = k * delta + c * un
+    if clip:
+        FN = np.maximum(FN, 0.0)
+    fdn = FN - k * delta
+    d_dash = 0.5 * (fdn + hist[:, 3]) * un * dt
+    hh = hist[:, :3]
+    h2 = np.sum(hh * hh, axis=1)
+    hp = hh - np.sum(hh * n, axis=1)[:, None] * n
+    p2 = np.sum(hp * hp, axis=1)
+    scale = np.where((h2 > 0) & (p2 > 0), np.sqrt(h2 / np.where(p2 > 0, p2, 1)), 1.0)
+    hold = np.where((h2 > 0)[:, None], hp * scale[:, None], hh)
+    hh = hold + ut * dt
+    ft = -kt[:, None] * hh - ct[:, None] * ut
+    ftn = np.linalg.norm(ft, axis=1)
+    fmax = mu * FN
+    slip = ftn > fmax
+    ft_s = ft * np.where(ftn > 0, fmax / np.where(ftn > 0, ftn, 1), 0)[:, None]
+    h_s = -ft_s / kt[:, None]
+    d_fric = np.where(slip, 0.5 * kt * np.sum((hh - h_s) * (hold + h_s), axis=1), 0.0)
+    g = np.where(slip[:, None], 0.0, -ct[:, None] * ut)
+    d_dash = d_dash - 0.5 * np.sum((g + hist[:, 4:7]) * ut, axis=1) * dt
+    ft = np.where(slip[:, None], ft_s, ft)
+    hh = np.where(slip[:, None], h_s, hh)
+    f = -FN[:, None] * n + ft
+    e_s = 0.5 * k * delta ** 2 + 0.5 * kt * np.sum(hh * hh, axis=1)
+    new_hist = np.concatenate([hh, fdn[:, None], g], axis=1)
+    return f, e_s, d_dash, d_fric, new_hist
+
+
 def pair_forces_ref(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, vel, omega,
                     mass, fixed, mat_k, mat_kt, mat_h, mat_mu, clip, dt):
     """Vectorised NumPy version of :func:`pair_forces` + :func:`gather_pair_forces`.
@@ -420,7 +454,6 @@ def pair_forces_ref(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, p
     xc = sph_pos[i] + (sph_radius[i] - 0.5 * delta)[:, None] * n
     bi, bj = sph_block[i], sph_block[j]
     u = (vel[bi] + np.cross(omega[bi], xc - pos[bi])) - (vel[bj] + np.cross(omega[bj], xc - pos[bj]))
-    v = u
     mi, mj = mass[bi], mass[bj]
     mstar = np.where(fixed[bi], mj, np.where(fixed[bj], mi, mi * mj / (mi + mj)))
     a, b = sph_material[i], sph_material[j]
@@ -429,36 +462,9 @@ def pair_forces_ref(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, p
     h = 0.5 * (mat_h[a] + mat_h[b])
     mu = np.minimum(mat_mu[a], mat_mu[b])
     c, ct = 2 * h * np.sqrt(mstar * k), 2 * h * np.sqrt(mstar * kt)
-    vn = np.sum(v * n, axis=1)
-    vt = v - vn[:, None] * n
     un = np.sum(u * n, axis=1)
     ut = u - un[:, None] * n
-    FN = k * delta + c * vn
-    if clip:
-        FN = np.maximum(FN, 0.0)
-    fdn = FN - k * delta
-    d_dash = 0.5 * (fdn + hist[:, 3]) * un * dt
-    hh = hist[:, :3].copy()
-    h2 = np.sum(hh * hh, axis=1)
-    hp = hh - np.sum(hh * n, axis=1)[:, None] * n
-    p2 = np.sum(hp * hp, axis=1)
-    scale = np.where((h2 > 0) & (p2 > 0), np.sqrt(h2 / np.where(p2 > 0, p2, 1)), 1.0)
-    hold = np.where((h2 > 0)[:, None], hp * scale[:, None], hh)
-    hh = hold + ut * dt
-    ft = -kt[:, None] * hh - ct[:, None] * vt
-    ftn = np.linalg.norm(ft, axis=1)
-    fmax = mu * FN
-    slip = ftn > fmax
-    ft_s = ft * np.where(ftn > 0, fmax / np.where(ftn > 0, ftn, 1), 0)[:, None]
-    h_s = -ft_s / kt[:, None]
-    d_fric = np.where(slip, 0.5 * kt * np.sum((hh - h_s) * (hold + h_s), axis=1), 0.0)
-    g = np.where(slip[:, None], 0.0, -ct[:, None] * vt)
-    d_dash = d_dash - 0.5 * np.sum((g + hist[:, 4:7]) * ut, axis=1) * dt
-    ft = np.where(slip[:, None], ft_s, ft)
-    hh = np.where(slip[:, None], h_s, hh)
-    f = -FN[:, None] * n + ft
-    e_s = 0.5 * k * delta ** 2 + 0.5 * kt * np.sum(hh * hh, axis=1)
-    new_hist = np.concatenate([hh, fdn[:, None], g], axis=1)
+    f, e_s, d_dash, d_fric, new_hist = _law_ref(delta, n, un, ut, hist, k, kt, c, ct, mu, clip, dt)
     # released contacts: last half of the dashpot trapezoid, history reset
     rel = 0.5 * hist[:, 3] * un * dt - 0.5 * np.sum(hist[:, 4:7] * ut, axis=1) * dt
     d_dash = np.where(on, d_dash, rel)
@@ -607,34 +613,9 @@ def wall_forces_ref(blk_sph_start, sph_pos, sph_radius, sph_material, sph_block,
         un = np.sum(u * n, axis=1)
         ut = u - un[:, None] * n
         H = hist[:, w]
-        FN = k * delta + c * un
-        if clip:
-            FN = np.maximum(FN, 0.0)
-        fdn = FN - k * delta
-        d_dash = 0.5 * (fdn + H[:, 3]) * un * dt
-        hh = H[:, :3]
-        h2 = np.sum(hh * hh, axis=1)
-        hp = hh - np.sum(hh * n, axis=1)[:, None] * n
-        p2 = np.sum(hp * hp, axis=1)
-        scale = np.where((h2 > 0) & (p2 > 0), np.sqrt(h2 / np.where(p2 > 0, p2, 1)), 1.0)
-        hold = np.where((h2 > 0)[:, None], hp * scale[:, None], hh)
-        hn = hold + ut * dt
-        ft = -kt[:, None] * hn - ct[:, None] * ut
-        ftn = np.linalg.norm(ft, axis=1)
-        fmax = mu * FN
-        slip = ftn > fmax
-        ft_s = ft * np.where(ftn > 0, fmax / np.where(ftn > 0, ftn, 1), 0)[:, None]
-        h_s = -ft_s / kt[:, None]
-        d_fric = np.where(slip, 0.5 * kt * np.sum((hn - h_s) * (hold + h_s), axis=1), 0.0)
-        g = np.where(slip[:, None], 0.0, -ct[:, None] * ut)
-        d_dash = d_dash - 0.5 * np.sum((g + H[:, 4:7]) * ut, axis=1) * dt
-        ft = np.where(slip[:, None], ft_s, ft)
-        hn = np.where(slip[:, None], h_s, hn)
-        f = -FN[:, None] * n + ft
-        e_s = 0.5 * k * delta ** 2 + 0.5 * kt * np.sum(hn * hn, axis=1)
+        f, e_s, d_dash, d_fric, new = _law_ref(delta, n, un, ut, H, k, kt, c, ct, mu, clip, dt)
         on = (delta > 0) & live
         rel = 0.5 * H[:, 3] * un * dt - 0.5 * np.sum(H[:, 4:7] * ut, axis=1) * dt
-        new = np.concatenate([hn, fdn[:, None], g], axis=1)
         new[~on] = 0.0
         hist[:, w] = np.where(live[:, None], new, H)
         f[~on] = 0.0
