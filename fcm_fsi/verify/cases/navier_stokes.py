@@ -219,6 +219,24 @@ def cylinder_2d1_solution(comm, h_cyl: float, h_far: float):
     return float(c_d), float(c_l), float(p[0] - p[1]), ncells
 
 
+
+def plot_cylinder_convergence(rows, reference: dict, keys: tuple[str, ...], path) -> None:
+    """c_D / c_L / Δp against mesh size (rows: (h, c_D, c_L, Δp, cells)) with the
+    Schäfer–Turek values; rank 0."""
+    plt = _plt()
+    columns = {"c_D": 1, "c_L": 2, "dp": 3}
+    fig, ax = plt.subplots(1, len(keys), figsize=(4 * len(keys), 3.4))
+    cells = [r[4] for r in rows]
+    for a, key in zip(ax, keys):
+        a.semilogx(cells, [r[columns[key]] for r in rows], "o-", label="P1/P1 reaction force")
+        a.axhline(reference[key], color="k", ls="--", label="Schäfer–Turek")
+        a.set_xlabel("cells"), a.set_title(key)
+    ax[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 @register("cylinder_2d1", "Schäfer–Turek 2D-1 (Re 20, steady): drag, lift, pressure drop", issue=3)
 def cylinder_2d1(level, out_dir: Path, comm) -> list[Metric]:
     levels = [(0.0025, 0.01)] if level == "quick" else [(0.01, 0.04), (0.005, 0.02), (0.0025, 0.01)]
@@ -229,17 +247,7 @@ def cylinder_2d1(level, out_dir: Path, comm) -> list[Metric]:
         log.info("2D-1 h_cyl %g: c_D %.6f c_L %.6f dp %.6f cells %d (%.1f s)", *rows[-1])
     c_d, c_l, dp, ncells = rows[-1][1:5]
     if comm.rank == 0:
-        plt = _plt()
-        fig, ax = plt.subplots(1, 3, figsize=(11, 3.4))
-        cells = [r[4] for r in rows]
-        for a, (key, j) in zip(ax, (("c_D", 1), ("c_L", 2), ("dp", 3))):
-            a.semilogx(cells, [r[j] for r in rows], "o-", label="P1/P1 reaction force")
-            a.axhline(ST_2D1[key], color="k", ls="--", label="Schäfer–Turek")
-            a.set_xlabel("cells"), a.set_title(key)
-        ax[0].legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out_dir / "cylinder_2d1_convergence.png", dpi=110)
-        plt.close(fig)
+        plot_cylinder_convergence(rows, ST_2D1, ("c_D", "c_L", "dp"), out_dir / "cylinder_2d1_convergence.png")
     return [rel_error_metric("c_D", c_d, ST_2D1["c_D"], 0.005),
             rel_error_metric("dp", dp, ST_2D1["dp"], 0.01),
             rel_error_metric("c_L", c_l, ST_2D1["c_L"], 0.10),
@@ -340,17 +348,7 @@ def cylinder_3d1z(level, out_dir: Path, comm) -> list[Metric]:
         log.info("3D-1Z h_cyl %g: c_D %.5f c_L %.5f dp %.5f cells %d (%.1f s)", *rows[-1])
     c_d, c_l, dp, ncells = rows[-1][1:5]
     if comm.rank == 0:
-        plt = _plt()
-        fig, ax = plt.subplots(1, 2, figsize=(8, 3.4))
-        cells = [r[4] for r in rows]
-        for a, (key, j) in zip(ax, (("c_D", 1), ("dp", 3))):
-            a.semilogx(cells, [r[j] for r in rows], "o-", label="P1/P1 reaction force")
-            a.axhline(ST_3D1Z[key], color="k", ls="--", label="Schäfer–Turek")
-            a.set_xlabel("cells"), a.set_title(key)
-        ax[0].legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(out_dir / "cylinder_3d1z_convergence.png", dpi=110)
-        plt.close(fig)
+        plot_cylinder_convergence(rows, ST_3D1Z, ("c_D", "dp"), out_dir / "cylinder_3d1z_convergence.png")
     return [rel_error_metric("c_D", c_d, ST_3D1Z["c_D"], 0.02),
             rel_error_metric("dp", dp, ST_3D1Z["dp"], 0.03),
             report_only("c_L", c_l, reference=ST_3D1Z["c_L"], note="no target in issue #3"),
