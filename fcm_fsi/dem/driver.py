@@ -25,15 +25,17 @@ from ..io.timing import StageTimer
 from .ledger import COLUMNS
 from .model import build_system
 from .output import read_checkpoint, write_checkpoint, write_pvd, write_vtp
+from .system import substep_count
 
 log = get_logger("dem")
 
 
 def _substeps(run_dt: float, dem_dt: float) -> int:
-    n = round(run_dt / dem_dt)
-    if n < 1 or abs(n * dem_dt - run_dt) > 1e-9 * run_dt:
-        raise ConfigError(f"key 'run.dt' = {run_dt} must be a whole multiple of dem.dt = {dem_dt} for a DEM run")
-    return n
+    """DEM steps per outer step; a mismatch is a case-file error on ``run.dt``."""
+    try:
+        return substep_count(run_dt, dem_dt)
+    except ValueError as err:
+        raise ConfigError(f"key 'run.dt' / 'dem.dt': {err}") from None
 
 
 def _truncate_csv(path: Path, t_max: float) -> None:

@@ -28,6 +28,21 @@ def critical_time_step(m: float, k: float, h: float) -> float:
     return 2.0 * math.sqrt(m / k) * (math.sqrt(h * h + 1.0) - h)
 
 
+def substep_count(fluid_dt: float, dem_dt: float) -> int:
+    """Whole number of DEM steps ``dem_dt`` [s] in one outer step ``fluid_dt`` [s] (the fluid
+    step of a coupled run, ``run.dt`` of a pure-DEM run), to 1e-9 relative.
+
+    Raises ValueError naming both steps and the nearest DEM step that divides ``fluid_dt``."""
+    if not (fluid_dt > 0 and dem_dt > 0):
+        raise ValueError(f"time steps must be > 0: fluid dt = {fluid_dt} s, DEM dt = {dem_dt} s")
+    n = max(round(fluid_dt / dem_dt), 1)
+    if abs(n * dem_dt - fluid_dt) > 1e-9 * fluid_dt:
+        raise ValueError(f"fluid dt = {fluid_dt:.10g} s is not a whole multiple of DEM dt = {dem_dt:.10g} s "
+                         f"(ratio {fluid_dt / dem_dt:.10g}); nearest valid DEM dt = {fluid_dt / n:.10g} s "
+                         f"({n} sub-steps)")
+    return n
+
+
 def effective_contact_mass(state: DEMState) -> float:
     """Smallest mass a contact can see: per sphere 1/m_eff = 1/m + |r|²/I_min (the block's
     translation plus its softest rotation about the centre of mass), halved (reduced mass of

@@ -220,9 +220,12 @@ class NavierStokes:
             T = fem.TensorFunctionSpace(mesh, ("Lagrange", 1))
             self.strain = fem.Function(T, name="strain_p1")
             psi = ufl.TestFunction(T)
-            dxp = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": 1})
-            self._strain_lumped = fem.petsc.assemble_vector(
-                fem.form(ufl.inner(ufl.as_matrix([[1.0] * gdim] * gdim), psi) * dxp))
+            # on a cut mesh the projection runs over the fluid part only (the weights change
+            # with the cut, so the lumped mass is re-assembled at every update)
+            dxp = self.dx if dx is not None else ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": 1})
+            self._strain_mass_form = fem.form(ufl.inner(ufl.as_matrix([[1.0] * gdim] * gdim), psi) * dxp)
+            self._strain_mass_fixed = dx is None
+            self._strain_lumped = fem.petsc.assemble_vector(self._strain_mass_form)
             self._strain_lumped.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
             self._strain_rhs_vec = self._strain_lumped.duplicate()
             self._strain_pending = psi
@@ -326,6 +329,11 @@ class NavierStokes:
         """
         if self.strain is None:
             return
+        if not self._strain_mass_fixed:
+            with self._strain_lumped.localForm() as loc:
+                loc.set(0.0)
+            fem.petsc.assemble_vector(self._strain_lumped, self._strain_mass_form)
+            self._strain_lumped.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         b = self._strain_rhs_vec
         with b.localForm() as loc:
             loc.set(0.0)

@@ -7,6 +7,8 @@
   with a z-aligned cylinder at (0.5, 0.2). Boundaries ``inlet outlet walls cylinder``.
   Built by gmsh on rank 0, cached as .msh under ``meshes/cache/`` and distributed with
   ``dolfinx.io.gmshio.model_to_mesh``.
+- :func:`channel_unfitted`: the same channels (2D or 3D) WITHOUT the cylinder hole, graded
+  to ``h_cyl`` around where the cylinder will be cut out by its level set (finite cover).
 """
 from __future__ import annotations
 
@@ -67,8 +69,10 @@ def box(comm, lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), n=(8, 8, 8)) -> Tagg
 
 
 def _classify_and_mesh(gmsh, dim: int, length: float, height: float, center, radius: float,
-                       h_cyl: float, h_far: float) -> None:
-    """Physical groups (fluid, inlet, outlet, walls, cylinder) and a distance-graded size field."""
+                       h_cyl: float, h_far: float, axis: int | None = None) -> None:
+    """Physical groups (fluid, inlet, outlet, walls, cylinder) and a size field graded with
+    the distance from the cylinder surface (or, unfitted, from its axis: ``axis`` is the
+    axis curve in 3D; in 2D the centre point is used)."""
     vols = gmsh.model.getEntities(dim)
     gmsh.model.addPhysicalGroup(dim, [v[1] for v in vols], 1)
     groups = {k: [] for k in CHANNEL_NAMES}
@@ -82,19 +86,30 @@ def _classify_and_mesh(gmsh, dim: int, length: float, height: float, center, rad
             groups["cylinder"].append(tag)
         else:
             groups["walls"].append(tag)
+    fitted = bool(groups["cylinder"])
     for name, tags in groups.items():
-        gmsh.model.addPhysicalGroup(dim - 1, tags, CHANNEL_NAMES[name])
-        gmsh.model.setPhysicalName(dim - 1, CHANNEL_NAMES[name], name)
+        if tags:
+            gmsh.model.addPhysicalGroup(dim - 1, tags, CHANNEL_NAMES[name])
+            gmsh.model.setPhysicalName(dim - 1, CHANNEL_NAMES[name], name)
     dist = gmsh.model.mesh.field.add("Distance")
-    gmsh.model.mesh.field.setNumbers(dist, "SurfacesList" if dim == 3 else "CurvesList", groups["cylinder"])
-    if dim == 2:
-        gmsh.model.mesh.field.setNumber(dist, "NumPointsPerCurve", 200)
+    if fitted:
+        gmsh.model.mesh.field.setNumbers(dist, "SurfacesList" if dim == 3 else "CurvesList", groups["cylinder"])
+        if dim == 2:
+            gmsh.model.mesh.field.setNumber(dist, "NumPointsPerCurve", 200)
+    elif dim == 2:
+        centre = gmsh.model.occ.addPoint(center[0], center[1], 0.0)
+        gmsh.model.occ.synchronize()
+        gmsh.model.mesh.field.setNumbers(dist, "PointsList", [centre])
+    else:
+        gmsh.model.mesh.field.setNumbers(dist, "CurvesList", [axis])
+        gmsh.model.mesh.field.setNumber(dist, "NumPointsPerCurve", 100)
+    d0 = 0.5 * radius if fitted else 1.5 * radius      # from the axis: the whole cut region is fine
     thr = gmsh.model.mesh.field.add("Threshold")
     gmsh.model.mesh.field.setNumber(thr, "InField", dist)
     gmsh.model.mesh.field.setNumber(thr, "SizeMin", h_cyl)
     gmsh.model.mesh.field.setNumber(thr, "SizeMax", h_far)
-    gmsh.model.mesh.field.setNumber(thr, "DistMin", 0.5 * radius)
-    gmsh.model.mesh.field.setNumber(thr, "DistMax", 0.5 * height + 3 * radius)
+    gmsh.model.mesh.field.setNumber(thr, "DistMin", d0)
+    gmsh.model.mesh.field.setNumber(thr, "DistMax", 0.5 * height + (3 * radius if fitted else d0 + 2 * radius))
     gmsh.model.mesh.field.setAsBackgroundMesh(thr)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
@@ -153,3 +168,26 @@ def channel_3d(comm, h_cyl: float = 0.01, h_far: float = 0.05) -> TaggedMesh:
         gmsh.model.occ.synchronize()
         _classify_and_mesh(gmsh, 3, L, H, c, r, h_cyl, h_far)
     return _build_or_load(comm, key, 3, build)
+
+
+def channel_unfitted(comm, dim: int, h_cyl: float, h_far: float) -> TaggedMesh:
+    """Schäfer–Turek channel (2D [0, 2.2] × [0, 0.41]; 3D [0, 2.5] × [0, 0.41]²) with no
+    hole: cells of size h_cyl within 1.5 radii of the cylinder axis, growing to h_far.
+    Boundaries ``inlet outlet walls``."""
+    L = 2.2 if dim == 2 else 2.5
+    H, r = 0.41, 0.05
+    c = (0.2, 0.2) if dim == 2 else (0.5, 0.2)
+    key = f"st{dim}d_unfitted_" + hashlib.sha1(f"{L},{H},{c},{r},{h_cyl},{h_far},v1".encode()).hexdigest()[:10]
+
+    def build(gmsh):
+        if dim == 2:
+            gmsh.model.occ.addRectangle(0, 0, 0, L, H)
+        else:
+            gmsh.model.occ.addBox(0, 0, 0, L, H, H)
+        gmsh.model.occ.synchronize()
+        axis = gmsh.model.occ.addLine(gmsh.model.occ.addPoint(c[0], c[1], 0.0),
+                                      gmsh.model.occ.addPoint(c[0], c[1], H if dim == 3 else 0.0)) \
+            if dim == 3 else None
+        gmsh.model.occ.synchronize()
+        _classify_and_mesh(gmsh, dim, L, H, c, r, h_cyl, h_far, axis=axis)
+    return _build_or_load(comm, key, dim, build)

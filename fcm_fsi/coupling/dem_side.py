@@ -1,0 +1,212 @@
+"""The DEM side of the sub-cycled fluid–DEM coupling (SPEC §3 steps a, d, e; issue #8).
+
+Per fluid step Δt_f the coupling loop
+
+1. asks :func:`shapes_of_blocks` once (at set-up) for the level-set primitives of every
+   block in its body frame, and :meth:`DEMSubcycler.pose` each step for where the bodies
+   are, so the fluid side can build the structure level set (step a);
+2. hands the fluid force and torque on every block to :meth:`DEMSubcycler.advance`, which
+   runs Δt_f / Δt_DEM explicit DEM steps (:func:`substep_count`) with that load held or
+   linearly interpolated and records what it delivered (step d);
+3. reads :meth:`DEMSubcycler.rigid_velocity` at the fluid's interface points as the
+   moving-wall velocity ū of the penalty term (step e).
+
+Parallel runs: the DEM is replicated
+------------------------------------
+Every rank holds the whole DEM and advances it identically. The fluid force on a block is
+a sum over the fluid partition, so every rank must pass the same, allreduced, force and
+torque; the DEM kernels are deterministic (independent of the Numba thread count), so the
+states then stay bit-identical. :meth:`DEMSubcycler.check_replicated` verifies it
+(collective; call it e.g. at every output) and stops every rank with the names of the
+arrays that differ.
+
+When the DEM outgrows one rank (the plan, not implemented): decompose the blocks by the
+fluid partition — a block belongs to the rank whose fluid subdomain holds its centre of
+mass; each rank also keeps *ghost* copies of the blocks within the contact range (largest
+block radius + Verlet skin) of its subdomain boundary, so its contacts and cohesive bonds
+are complete; owners integrate their blocks and send the new poses and velocities to the
+ranks that ghost them after every DEM step (migrating blocks whose centre crossed over);
+at each fluid step every owner broadcasts its blocks' poses (a small (nb, 7) allgather)
+so that every rank can evaluate the level set of every block near its own cells, and the
+fluid force on a block is reduced to its owner only.
+"""
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from ..config.dem import DEMConfig
+from ..dem.model import build_structure, template_of
+from ..dem.state import DEMState
+from ..dem.system import DEMSystem, substep_count
+from ..fcm.levelset import BOX, SPHERE, Shapes
+
+__all__ = ["DEMSubcycler", "Exchange", "rigid_body_velocity", "shapes_of_blocks", "state_digests",
+           "substep_count"]
+
+REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # compared across ranks
+
+
+# ------------------------------------------------------------------ level-set primitives
+def shapes_of_blocks(cfg: DEMConfig, state: DEMState) -> Shapes:
+    """Level-set primitives of every block of ``build_state(cfg)`` in its body (principal)
+    frame: a box block is one solid box of its size [m], sphere and clump blocks are the union
+    of their spheres, structure blocks are the boxes lo..hi of the builder. The world shape of
+    block b is ``pos[b] + R(quat[b]) (offset + rot x_shape)``."""
+    parts, first = [], 0
+    for b, count in _described_blocks(cfg):
+        blocks = np.arange(first, first + count)
+        if b.shape == "box":
+            density = cfg.materials[cfg.material_index(b.material)].density
+            # R_body: principal → description frame, so the box axes in the body frame are its
+            # transpose; the solid box's centre is its centre of mass (offset 0).
+            parts.append(_boxes(blocks, 0.5 * np.asarray(b.size), template_of(b, density).R_body.T))
+        else:
+            parts.append(_spheres(state, blocks))
+        first += count
+    structure = build_structure(cfg)
+    if structure is not None:   # builder blocks: axis-aligned boxes at identity orientation
+        parts.append(_boxes(first + np.arange(structure.nb), 0.5 * (structure.hi - structure.lo), np.eye(3)))
+        first += structure.nb
+    if first != state.nb:
+        raise ValueError(f"the DEM config describes {first} blocks but the state has {state.nb}")
+    return Shapes.concat(parts)
+
+
+def _described_blocks(cfg: DEMConfig):
+    """(BlockConfig, number of blocks) in the state's block order (see ``build_state``):
+    cfg.blocks one by one, then each generator's template ``count`` times."""
+    for b in cfg.blocks:
+        yield b, 1
+    for g in cfg.generators:
+        yield g.block, g.count
+
+
+def _boxes(blocks: np.ndarray, half, rot) -> Shapes:
+    """One box per block: half extents [m] (3,) or (n, 3), shape → body rotation (3, 3)."""
+    n = len(blocks)
+    return Shapes(kind=np.full(n, BOX), body=blocks, offset=np.zeros((n, 3)),
+                  rot=np.broadcast_to(rot, (n, 3, 3)), half=np.broadcast_to(half, (n, 3)))
+
+
+def _spheres(state: DEMState, blocks: np.ndarray) -> Shapes:
+    """The spheres of consecutive ``blocks`` as they are in the state (body frame)."""
+    s = slice(state.blk_sph_start[blocks[0]], state.blk_sph_start[blocks[-1] + 1])
+    n = s.stop - s.start
+    half = np.zeros((n, 3))
+    half[:, 0] = state.sph_radius[s]
+    return Shapes(kind=np.full(n, SPHERE), body=state.sph_block[s], offset=state.sph_local[s],
+                  rot=np.broadcast_to(np.eye(3), (n, 3, 3)), half=half)
+
+
+# ------------------------------------------------------------------ interface velocity
+def rigid_body_velocity(pos: np.ndarray, vel: np.ndarray, omega: np.ndarray, points: np.ndarray,
+                        owner: np.ndarray) -> np.ndarray:
+    """ū = v_b + ω_b × (x − x_b) [m/s] at ``points`` x (n, 3) [m] of block b = ``owner``;
+    points with a negative owner (levelset STATIC −1, NO_SHAPE −2) get ū = 0."""
+    points = np.asarray(points, np.float64)
+    owner = np.asarray(owner, np.int64)
+    u = np.zeros_like(points)
+    on = owner >= 0
+    b = owner[on]
+    u[on] = vel[b] + np.cross(omega[b], points[on] - pos[b])
+    return u
+
+
+# ------------------------------------------------------------------ sub-cycling
+@dataclass(frozen=True)
+class Exchange:
+    """What one fluid step's DEM advance delivered (issue #8 item 3: the DEM half of the
+    momentum-exchange check)."""
+
+    n_sub: int                     # DEM steps taken
+    impulse: np.ndarray            # (nb, 3) Σ ext_force·dt over the steps [N s] (a fixed
+                                   # block passes its share on to the ground)
+    angular_impulse: np.ndarray    # (nb, 3) Σ ext_torque·dt, about the centres of mass [N m s]
+    wall_seconds: float            # wall time of the DEM steps [s]
+    dt_over_dt_cr: float           # DEM dt / Δt_cr, the stability margin (< dem.dt_safety) [-]
+
+
+class DEMSubcycler:
+    """Advance a :class:`DEMSystem` by whole fluid steps under the fluid's load.
+
+    The load of the latest exchange lives in ``state.ext_force`` / ``state.ext_torque``
+    (world frame, torque about the centre of mass), so a checkpoint of the state carries
+    it; in a fresh state it is zero unless the caller sets it."""
+
+    def __init__(self, system: DEMSystem):
+        self.system = system
+        self.last: Exchange | None = None
+
+    def advance(self, fluid_dt: float, force: np.ndarray, torque: np.ndarray,
+                mode: Literal["hold", "linear"] = "hold") -> None:
+        """Run Δt_f / Δt_DEM DEM steps with the fluid ``force`` (nb, 3) [N] and ``torque``
+        (nb, 3) [N m] on every block, and record the :class:`Exchange` in ``self.last``.
+
+        ``hold``: the new load acts over the whole interval (impulse F·Δt_f).
+        ``linear``: the load ramps from the previous exchange's to the new one, sampled at
+        the middle (k + ½)/n of each DEM step, so the impulse is the trapezoid
+        Δt_f (F_prev + F)/2 — the impulse of a Crank–Nicolson fluid step."""
+        st, dt = self.system.state, self.system.dt
+        n = substep_count(fluid_dt, dt)
+        if mode not in ("hold", "linear"):
+            raise ValueError(f"mode = {mode!r}; allowed: 'hold', 'linear'")
+        F0, T0 = st.ext_force.copy(), st.ext_torque.copy()
+        F1, T1 = _per_block(force, st.nb, "force"), _per_block(torque, st.nb, "torque")
+        impulse, angular = np.zeros((st.nb, 3)), np.zeros((st.nb, 3))
+        st.ext_force[:], st.ext_torque[:] = F1, T1
+        wall0 = time.perf_counter()
+        for k in range(n):
+            if mode == "linear":
+                s = (k + 0.5) / n
+                st.ext_force[:] = (1.0 - s) * F0 + s * F1
+                st.ext_torque[:] = (1.0 - s) * T0 + s * T1
+            impulse += dt * st.ext_force
+            angular += dt * st.ext_torque
+            self.system.step()
+        wall = time.perf_counter() - wall0
+        st.ext_force[:], st.ext_torque[:] = F1, T1
+        self.last = Exchange(n, impulse, angular, wall, dt / self.system.critical_time_step())
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the centres of mass (nb, 3) [m] and orientations (nb, 4) (w, x, y, z)."""
+        st = self.system.state
+        return st.pos.copy(), st.quat.copy()
+
+    def rigid_velocity(self, points: np.ndarray, owner: np.ndarray) -> np.ndarray:
+        """Rigid-body velocity ū [m/s] at ``points`` (n, 3) of block ``owner`` (n,), zero
+        where owner < 0. Uses the leapfrog velocities v, ω of the last half step (within
+        O(Δt_DEM) of the end of the fluid step)."""
+        st = self.system.state
+        return rigid_body_velocity(st.pos, st.vel, st.omega, points, owner)
+
+    def check_replicated(self, comm) -> None:
+        """Collective: raise RuntimeError on every rank when the replicated DEM state differs
+        between ranks, naming the arrays that differ and the ranks that differ from rank 0."""
+        st = self.system.state
+        every = comm.allgather(state_digests(st))
+        differ = [name for name in every[0] if len({d[name] for d in every}) > 1]
+        if differ:
+            ranks = [r for r, d in enumerate(every) if d != every[0]]
+            raise RuntimeError(
+                f"replicated DEM differs between ranks at DEM step {st.step} (t = {st.t:.9g} s): "
+                f"{', '.join(differ)} of rank(s) {ranks} differ from rank 0. Every rank must pass "
+                f"bit-identical (allreduced) fluid forces and torques to DEMSubcycler.advance")
+
+
+def state_digests(state: DEMState) -> dict[str, str]:
+    """SHA-256 of the bytes of each replicated array, and of (t, step) as ``time``."""
+    arrays = {name: getattr(state, name) for name in REPLICATED}
+    arrays["time"] = np.array([state.t, state.step], np.float64)
+    return {name: hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest() for name, a in arrays.items()}
+
+
+def _per_block(a, nb: int, what: str) -> np.ndarray:
+    a = np.asarray(a, np.float64)
+    if a.shape != (nb, 3):
+        raise ValueError(f"fluid {what} must have shape ({nb}, 3) (one vector per block), got {a.shape}")
+    return a

@@ -1,0 +1,387 @@
+"""Signed distance (level set) of the structure on mesh nodes (SPEC §1, issue #5 item 1).
+
+The structure is a union of primitives — spheres, boxes and finite capped cylinders —
+each either static (world frame) or carried by a rigid DEM body. Its level set is
+
+    φ(x) = min_i d_i(x),   clipped to [−cutoff, +cutoff],
+
+with d_i the exact signed distance to primitive i, **positive outside the structure (in
+the fluid), negative inside**. Only a band |φ| < cutoff around the surface is needed by
+the finite-cover cut, so points farther than ``cutoff`` from every primitive get exactly
++cutoff and points deeper than ``cutoff`` get exactly −cutoff.
+
+2D meshes pass points with z = 0 and 3D primitives: a disc is a z-cylinder, a rectangle a
+box. Their extent along z must be at least 2·cutoff, so that the depth below the end caps
+never undercuts the in-plane depth within the band.
+
+Poses: body ``b`` has centre of mass ``body_pos[b]`` and unit quaternion ``body_quat[b]``
+= (w, x, y, z), body → world, ``x_w = body_pos + R(q) x_b`` — the convention of
+``fcm_fsi/dem/state.py`` (the kernel rotates with :func:`fcm_fsi.dem.bodies.rotate`, the
+reference with :func:`fcm_fsi.dem.state.quat_to_matrix_np`). A primitive's frame sits at
+``offset`` in its body frame, rotated by ``rot`` (shape frame → body frame).
+
+Search: every call (i) moves the primitives to the world, O(shapes); (ii) lists each
+primitive in the cells of a uniform grid that the box around its *reach sphere* (bounding
+radius + cutoff) overlaps — cell edge = median reach, so a typical primitive sits in ≤ 27 cells and
+the grid is capped at O(shapes) cells; (iii) each point reads the one cell it lies in and
+evaluates only the listed primitives whose reach sphere contains it. Any primitive that
+can bring φ below +cutoff is in that list, and a point inside a primitive is always inside
+its reach, so the sign is exact everywhere. Cost O(points + shapes) for bounded primitive
+sizes; points are processed in parallel, each independently, so results do not depend on
+the thread count.
+
+measured (numba 0.56, 2 cores shared with other jobs, load ≈ 2.5, warm): 1e6 random points
+in a 1 m cube against 1000 boxes of edge 2–6 cm on 1000 randomly posed bodies, cutoff 3 cm
+(half the points in the band): 0.09–0.12 s per ``evaluate`` on 1 thread, 0.17–0.18 s on
+2 threads (the second core was busy); 6.6 candidates per point, 27 cells per box.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from fcm_fsi.dem.bodies import rotate
+from fcm_fsi.dem.state import quat_to_matrix_np
+
+SPHERE, BOX, CYLINDER = 0, 1, 2
+NO_SHAPE = -2            # owner of points with no primitive within the cutoff
+STATIC = -1              # body index of a static (world-frame) primitive
+
+
+# --------------------------------------------------------------------------- shapes
+
+@dataclass(frozen=True)
+class Shapes:
+    """Primitives in body frames. Arrays of length nshape (SI units).
+
+    kind    int64           0 sphere, 1 box, 2 cylinder (finite, capped; axis = shape-frame z)
+    body    int64           index of the body that carries the shape; −1 = static (world frame)
+    offset  (nshape, 3)     shape centre in the body frame [m]
+    rot     (nshape, 3, 3)  shape frame → body frame rotation
+    half    (nshape, 3)     box half extents; sphere (r, 0, 0); cylinder (r, half_length, 0) [m]
+
+    Build them with :meth:`sphere`, :meth:`box`, :meth:`cylinder` and join with
+    :meth:`concat`. A DEM box block of edge lengths (a, b, c), centred at its centre of mass
+    in its principal frame, is ``Shapes.box((0, 0, 0), (a, b, c), body=i)``.
+    """
+
+    kind: np.ndarray
+    body: np.ndarray
+    offset: np.ndarray
+    rot: np.ndarray
+    half: np.ndarray
+
+    def __post_init__(self):
+        n = len(self.kind)
+        arrays = {"kind": (np.asarray(self.kind, np.int64), (n,)),
+                  "body": (np.asarray(self.body, np.int64), (n,)),
+                  "offset": (np.asarray(self.offset, np.float64).reshape(-1, 3), (n, 3)),
+                  "rot": (np.asarray(self.rot, np.float64).reshape(-1, 3, 3), (n, 3, 3)),
+                  "half": (np.asarray(self.half, np.float64).reshape(-1, 3), (n, 3))}
+        for name, (a, shape) in arrays.items():
+            if a.shape != shape:
+                raise ValueError(f"Shapes.{name}: shape {a.shape}, expected {shape}")
+            object.__setattr__(self, name, np.ascontiguousarray(a))
+        _check_shapes(self)
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+    @classmethod
+    def sphere(cls, centre, r: float, body: int = STATIC) -> "Shapes":
+        """Sphere of radius ``r`` [m] centred at ``centre`` [m] (body frame, or world if static)."""
+        return cls._one(SPHERE, body, centre, np.eye(3), (r, 0.0, 0.0))
+
+    @classmethod
+    def box(cls, centre, size, rot=None, body: int = STATIC) -> "Shapes":
+        """Box of edge lengths ``size`` = (a, b, c) [m] along the columns of ``rot``
+        (shape → body frame, identity by default), centred at ``centre`` [m]."""
+        return cls._one(BOX, body, centre, np.eye(3) if rot is None else rot, 0.5 * np.asarray(size, float))
+
+    @classmethod
+    def cylinder(cls, centre, r: float, length: float, axis=(0.0, 0.0, 1.0), body: int = STATIC) -> "Shapes":
+        """Capped cylinder of radius ``r`` and length ``length`` [m] along ``axis``, centred
+        at ``centre`` [m]. In 2D (points at z = 0) the default axis gives a disc of radius r."""
+        return cls._one(CYLINDER, body, centre, _frame_with_z_along(axis), (r, 0.5 * length, 0.0))
+
+    @classmethod
+    def concat(cls, parts: list["Shapes"]) -> "Shapes":
+        """All primitives of ``parts``, in order."""
+        if not parts:
+            return cls(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)),
+                       np.zeros((0, 3, 3)), np.zeros((0, 3)))
+        return cls(*(np.concatenate([getattr(p, f) for p in parts])
+                     for f in ("kind", "body", "offset", "rot", "half")))
+
+    @classmethod
+    def _one(cls, kind, body, centre, rot, half) -> "Shapes":
+        return cls(np.array([kind]), np.array([body]), np.reshape(centre, (1, 3)),
+                   np.reshape(rot, (1, 3, 3)), np.reshape(half, (1, 3)))
+
+
+def _check_shapes(s: Shapes) -> None:
+    """Reject unknown kinds, body < −1, non-positive sizes and improper rotations."""
+    bad = np.flatnonzero((s.kind < SPHERE) | (s.kind > CYLINDER))
+    if bad.size:
+        raise ValueError(f"Shapes.kind[{bad[0]}] = {s.kind[bad[0]]}: allowed 0 sphere, 1 box, 2 cylinder")
+    bad = np.flatnonzero(s.body < STATIC)
+    if bad.size:
+        raise ValueError(f"Shapes.body[{bad[0]}] = {s.body[bad[0]]}: allowed −1 (static) or a body index ≥ 0")
+    used = np.array([[True, False, False], [True, True, True], [True, True, False]])[s.kind]
+    bad = np.flatnonzero(np.any(used & ~(s.half > 0), axis=1))
+    if bad.size:
+        raise ValueError(f"Shapes.half[{bad[0]}] = {s.half[bad[0]]}: sizes of kind {s.kind[bad[0]]} must be > 0")
+    err = np.abs(np.einsum("sji,sjk->sik", s.rot, s.rot) - np.eye(3)).max(axis=(1, 2), initial=0.0)
+    bad = np.flatnonzero((err > 1e-9) | (np.linalg.det(s.rot) < 0))
+    if bad.size:
+        raise ValueError(f"Shapes.rot[{bad[0]}] is not a proper rotation (RᵀR − I up to {err[bad[0]]:.2e})")
+
+
+def _frame_with_z_along(axis) -> np.ndarray:
+    """A rotation whose third column is the unit vector along ``axis``."""
+    a = np.asarray(axis, np.float64)
+    a = a / np.linalg.norm(a)
+    helper = np.eye(3)[np.argmin(np.abs(a))]
+    e1 = np.cross(helper, a)
+    e1 /= np.linalg.norm(e1)
+    return np.column_stack([e1, np.cross(a, e1), a])
+
+
+def bounding_radius(shapes: Shapes) -> np.ndarray:
+    """Radius [m] of the sphere about each primitive's centre that contains it."""
+    h = shapes.half
+    return np.select([shapes.kind == SPHERE, shapes.kind == BOX],
+                     [h[:, 0], np.linalg.norm(h, axis=1)], np.hypot(h[:, 0], h[:, 1]))
+
+
+# --------------------------------------------------------------------------- kernels
+
+@numba.njit(cache=True)
+def _world_frames(body, offset, rot, body_pos, body_quat):
+    """World centre (ns, 3) [m] and shape → world rotation (ns, 3, 3) of every primitive."""
+    ns = body.shape[0]
+    centre = offset.copy()
+    R = rot.copy()
+    for s in range(ns):
+        b = body[s]
+        if b == STATIC:
+            continue
+        q0, q1, q2, q3 = body_quat[b, 0], body_quat[b, 1], body_quat[b, 2], body_quat[b, 3]
+        rx, ry, rz = rotate(q0, q1, q2, q3, offset[s, 0], offset[s, 1], offset[s, 2])
+        centre[s, 0] = body_pos[b, 0] + rx
+        centre[s, 1] = body_pos[b, 1] + ry
+        centre[s, 2] = body_pos[b, 2] + rz
+        for c in range(3):
+            R[s, 0, c], R[s, 1, c], R[s, 2, c] = rotate(q0, q1, q2, q3, rot[s, 0, c], rot[s, 1, c], rot[s, 2, c])
+    return centre, R
+
+
+@numba.njit(cache=True)
+def _grid(centre, reach, cell, max_cells):
+    """Grid over the reach boxes of all primitives: lower corner, cells per axis, cell edge [m].
+    The edge grows until the grid has at most ``max_cells`` cells."""
+    lo = np.empty(3)
+    span = np.empty(3)
+    for d in range(3):
+        lo[d] = (centre[:, d] - reach).min()
+        span[d] = (centre[:, d] + reach).max() - lo[d]
+    dims = np.empty(3, np.int64)
+    while True:
+        ncell = 1.0
+        for d in range(3):
+            ncell *= np.floor(span[d] / cell) + 1.0
+        if ncell <= max_cells:
+            break
+        cell *= max(1.26, 0.99 * (ncell / max_cells) ** (1.0 / 3.0))
+    for d in range(3):
+        dims[d] = int(span[d] / cell) + 1
+    return lo, dims, cell
+
+
+@numba.njit(cache=True)
+def _cell_range(c, r, lo, cell, n):
+    """Cells [first, last] along one axis touched by the interval [c − r, c + r]."""
+    first = max(int(np.floor((c - r - lo) / cell)), 0)
+    last = min(int(np.floor((c + r - lo) / cell)), n - 1)
+    return first, last
+
+
+@numba.njit(cache=True)
+def _bin_shapes(centre, reach, lo, dims, cell):
+    """CSR lists cell → primitives whose reach box touches the cell, in primitive order."""
+    ns = centre.shape[0]
+    ncell = dims[0] * dims[1] * dims[2]
+    start = np.zeros(ncell + 1, np.int64)
+    for sweep in range(2):          # counting sort: sweep 0 counts the listings per cell, sweep 1 files them
+        fill = start[:-1].copy()
+        items = np.empty(start[ncell] if sweep == 1 else 0, np.int64)
+        for s in range(ns):
+            x0, x1 = _cell_range(centre[s, 0], reach[s], lo[0], cell, dims[0])
+            y0, y1 = _cell_range(centre[s, 1], reach[s], lo[1], cell, dims[1])
+            z0, z1 = _cell_range(centre[s, 2], reach[s], lo[2], cell, dims[2])
+            for ix in range(x0, x1 + 1):
+                for iy in range(y0, y1 + 1):
+                    for iz in range(z0, z1 + 1):
+                        c = (ix * dims[1] + iy) * dims[2] + iz
+                        if sweep == 0:
+                            start[c + 1] += 1
+                        else:
+                            items[fill[c]] = s
+                            fill[c] += 1
+        if sweep == 0:
+            for c in range(ncell):
+                start[c + 1] += start[c]
+    return start, items
+
+
+@numba.njit(cache=True, inline="always")
+def _local_distance(kind, hx, hy, hz, px, py, pz):
+    """Exact signed distance [m] of the shape-frame point p to a centred primitive."""
+    if kind == SPHERE:
+        return np.sqrt(px * px + py * py + pz * pz) - hx
+    if kind == BOX:
+        qx, qy, qz = abs(px) - hx, abs(py) - hy, abs(pz) - hz
+        ox, oy, oz = max(qx, 0.0), max(qy, 0.0), max(qz, 0.0)
+        return np.sqrt(ox * ox + oy * oy + oz * oz) + min(max(qx, max(qy, qz)), 0.0)
+    qr, qz = np.sqrt(px * px + py * py) - hx, abs(pz) - hy          # cylinder: radial, axial
+    orr, oz = max(qr, 0.0), max(qz, 0.0)
+    return np.sqrt(orr * orr + oz * oz) + min(max(qr, qz), 0.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _point_cell(x, lo, dims, cell):
+    """Flat index of the grid cell holding point x, −1 outside the grid."""
+    c = 0
+    for d in range(3):
+        t = (x[d] - lo[d]) / cell
+        if not (0.0 <= t < dims[d]):
+            return -1
+        c = c * dims[d] + int(t)
+    return c
+
+
+@numba.njit(cache=True, parallel=True)
+def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, start, items, phi, owner):
+    """Clipped union distance φ and owner body at every point; returns the number of
+    (point, primitive) candidates read from the bins (the search cost)."""
+    tests = 0
+    for i in numba.prange(x.shape[0]):
+        best = cutoff
+        arg = -1
+        c = _point_cell(x[i], lo, dims, cell)
+        if c >= 0:
+            for k in range(start[c], start[c + 1]):
+                s = items[k]
+                dx = x[i, 0] - centre[s, 0]
+                dy = x[i, 1] - centre[s, 1]
+                dz = x[i, 2] - centre[s, 2]
+                reach = radius[s] + cutoff
+                if dx * dx + dy * dy + dz * dz >= reach * reach:
+                    continue
+                px = R[s, 0, 0] * dx + R[s, 1, 0] * dy + R[s, 2, 0] * dz     # Rᵀ (x − c)
+                py = R[s, 0, 1] * dx + R[s, 1, 1] * dy + R[s, 2, 1] * dz
+                pz = R[s, 0, 2] * dx + R[s, 1, 2] * dy + R[s, 2, 2] * dz
+                d = _local_distance(kind[s], half[s, 0], half[s, 1], half[s, 2], px, py, pz)
+                if d < best:
+                    best = d
+                    arg = s
+            tests += start[c + 1] - start[c]
+        phi[i] = max(best, -cutoff)
+        owner[i] = NO_SHAPE if arg < 0 else body[arg]
+    return tests
+
+
+# --------------------------------------------------------------------------- interface
+
+class StructureLevelSet:
+    """Level set of a union of primitives, re-evaluated at every fluid step for new body poses.
+
+    ``pair_tests`` and ``bin_entries`` hold the search cost of the last :meth:`evaluate`:
+    (point, primitive) candidates read from the bins, and (primitive, cell) listings.
+    """
+
+    def __init__(self, shapes: Shapes, nbodies: int, cutoff: float):
+        if not cutoff > 0:
+            raise ValueError(f"cutoff = {cutoff}: must be > 0 [m]")
+        if len(shapes) and shapes.body.max() >= nbodies:
+            raise ValueError(f"Shapes.body refers to body {shapes.body.max()}, but nbodies = {nbodies}")
+        self.shapes = shapes
+        self.nbodies = int(nbodies)
+        self.cutoff = float(cutoff)
+        self._radius = bounding_radius(shapes)
+        self._reach = self._radius + self.cutoff
+        self._cell = float(np.median(self._reach)) if len(shapes) else 1.0
+        self._max_cells = 64 * len(shapes) + 4096
+        self.pair_tests = 0
+        self.bin_entries = 0
+
+    def evaluate(self, x: np.ndarray, body_pos: np.ndarray, body_quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """φ and owner at the points ``x`` (n, 3) [m] (2D meshes pass z = 0).
+
+        ``body_pos`` (nbodies, 3) [m] and unit ``body_quat`` (nbodies, 4) = (w, x, y, z),
+        body → world. Returns φ (n,) [m], > 0 in the fluid, < 0 inside the structure, clipped
+        to [−cutoff, cutoff], and owner (n,) int64: the body of the primitive attaining the
+        minimum (−1 static), −2 where no primitive is closer than the cutoff.
+        """
+        x = np.ascontiguousarray(x, np.float64)
+        body_pos = np.ascontiguousarray(body_pos, np.float64).reshape(self.nbodies, 3)
+        body_quat = np.ascontiguousarray(body_quat, np.float64).reshape(self.nbodies, 4)
+        if x.ndim != 2 or x.shape[1] != 3:
+            raise ValueError(f"points x: shape {x.shape}, expected (n, 3)")
+        phi = np.full(x.shape[0], self.cutoff)
+        owner = np.full(x.shape[0], NO_SHAPE, np.int64)
+        self.pair_tests = self.bin_entries = 0
+        if not len(self.shapes):
+            return phi, owner
+        s = self.shapes
+        centre, R = _world_frames(s.body, s.offset, s.rot, body_pos, body_quat)
+        lo, dims, cell = _grid(centre, self._reach, self._cell, self._max_cells)
+        start, items = _bin_shapes(centre, self._reach, lo, dims, cell)
+        self.pair_tests = _evaluate(x, s.kind, s.body, s.half, self._radius, centre, R, self.cutoff,
+                                    lo, dims, cell, start, items, phi, owner)
+        self.bin_entries = items.shape[0]
+        return phi, owner
+
+
+# --------------------------------------------------------------------------- reference
+
+def _box_distance_reference(p: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Signed distance to the box |p_k| ≤ half_k in any number of dimensions (last axis):
+    the distance to the clamped closest point outside, minus the depth to the nearest face inside."""
+    gap = np.linalg.norm(p - np.clip(p, -half, half), axis=-1)
+    depth = np.min(half - np.abs(p), axis=-1)
+    return np.where(gap > 0, gap, -depth)
+
+
+def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: float):
+    """Brute-force NumPy reference of :meth:`StructureLevelSet.evaluate` (all points × all
+    primitives). Each primitive reduces to a box in its symmetry coordinates: a sphere is the
+    interval |ρ₃| ≤ r in the distance ρ₃ from its centre, a cylinder the rectangle
+    |ρ| ≤ r, |z| ≤ h/2 in (radial distance, axial coordinate)."""
+    x = np.asarray(x, np.float64)
+    phi = np.full(len(x), float(cutoff))
+    owner = np.full(len(x), NO_SHAPE, np.int64)
+    if not len(shapes):
+        return phi, owner
+    Rb = quat_to_matrix_np(np.asarray(body_quat, np.float64).reshape(-1, 4))
+    moving = shapes.body >= 0
+    b = shapes.body[moving]
+    centre, R = shapes.offset.copy(), shapes.rot.copy()
+    body_pos = np.asarray(body_pos, np.float64).reshape(-1, 3)
+    centre[moving] = body_pos[b] + np.einsum("sij,sj->si", Rb[b], centre[moving])
+    R[moving] = Rb[b] @ R[moving]
+    p = np.einsum("sji,nsj->nsi", R, x[:, None, :] - centre[None])       # (n, ns, 3) shape frame
+    h = shapes.half
+    d = np.select(
+        [shapes.kind == SPHERE, shapes.kind == BOX],
+        [_box_distance_reference(np.linalg.norm(p, axis=-1, keepdims=True), h[:, :1]),
+         _box_distance_reference(p, h)],
+        _box_distance_reference(np.stack([np.hypot(p[..., 0], p[..., 1]), p[..., 2]], axis=-1), h[:, :2]))
+    arg = np.argmin(d, axis=1)
+    dmin = d[np.arange(len(x)), arg]
+    near = dmin < cutoff
+    phi[near] = np.maximum(dmin[near], -cutoff)
+    owner[near] = shapes.body[arg[near]]
+    return phi, owner
