@@ -49,6 +49,10 @@ def run_case(case, out: Path, comm, restart: str | None, case_dir: Path) -> None
         from .simulation.fluid import FluidModel
         from .simulation.loop import TimeLoop
         TimeLoop(case, FluidModel(case, comm, case_dir), out, comm, restart).run()
+    elif physics == "coupled":
+        from .simulation.coupled import CoupledModel
+        from .simulation.loop import TimeLoop
+        TimeLoop(case, CoupledModel(case, comm, case_dir, out_dir=out), out, comm, restart).run()
     elif physics == "dem":
         from .dem.driver import run_dem_case
         run_dem_case(case, out, comm, restart)

@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from .coupling import CouplingConfig
 from .dem import DEMConfig
 from .fields import param
 from .fluid import FluidConfig
@@ -25,6 +26,8 @@ class Case:
     phase_field: PhaseFieldConfig | None = param(None, doc="free surface / advected interface")
     fluid: FluidConfig | None = param(None, doc="Navier–Stokes fluid")
     dem: DEMConfig | None = param(None, doc="discrete-element blocks")
+    coupling: CouplingConfig = param(default_factory=CouplingConfig,
+                                     doc="fluid ⇄ DEM coupling (used when both fluid and dem are given)")
     output: OutputConfig = param(default_factory=OutputConfig, doc="output settings")
 
     def __post_init__(self) -> None:
@@ -35,6 +38,18 @@ class Case:
         pf = self.phase_field
         if pf is not None and self.fluid is None and pf.velocity is None:
             raise ConfigError("key 'phase_field.velocity' is required when there is no fluid section")
+        if self.fluid is not None and self.dem is not None:
+            self._check_coupled()
+
+    def _check_coupled(self) -> None:
+        dim = len(self.mesh.lower)
+        g_fluid = tuple(self.fluid.gravity) + (0.0,) * (3 - len(self.fluid.gravity))
+        if any(abs(a - b) > 1e-12 * max(1.0, abs(a)) for a, b in zip(g_fluid, self.dem.gravity)):
+            raise ConfigError(f"keys 'fluid.gravity' = {list(self.fluid.gravity)} and 'dem.gravity' = "
+                              f"{list(self.dem.gravity)} must be the same vector (2D fluids: dem.gravity = [gx, gy, 0])")
+        if dim == 2 and self.coupling.depth is None:
+            raise ConfigError("key 'coupling.depth' is required for a 2D fluid with dem blocks: the out-of-plane "
+                              "extent (m) that turns the fluid's force per unit depth into a force")
 
     @property
     def physics(self) -> str:

@@ -49,13 +49,14 @@ class FluidModel:
 
     series_units = {"u_max": "m/s", "cfl": "-", "divergence_l2": "1/s", "ns_iterations": "-"}
 
-    def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None):
-        self.mesh = build_mesh(case.mesh, comm, case_dir)
+    def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None, *, mesh=None,
+                 ns_options: dict | None = None):
+        self.mesh = mesh if mesh is not None else build_mesh(case.mesh, comm, case_dir)
         self.gdim = self.mesh.geometry.dim
         self.h_min = min_cell_size(self.mesh)
         tagged = tag_box_boundaries(self.mesh, case.mesh.lower, case.mesh.upper)
         self.ns = NavierStokes(self.mesh, case.fluid, case.run.dt, facet_tags=tagged.facet_tags,
-                               boundary_names=tagged.names)
+                               boundary_names=tagged.names, **(ns_options or {}))
         self.u_out = self.ns.U.sub(0).collapse()
         self.u_out.name = "u"
         self.p_out = self.ns.U.sub(1).collapse()

@@ -85,9 +85,12 @@ class TwoPhaseModel:
                     "kinetic_energy": "J (J/m in 2D)", "phi_min": "-", "phi_max": "-",
                     "ns_iterations": "-", "pf_iterations": "-"}
 
-    def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None):
+    def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None, *, mesh=None,
+                 ns_options: dict | None = None):
+        """``mesh`` and ``ns_options`` (extra NavierStokes keywords, e.g. the cut measure and
+        wall term of :mod:`.coupled`) let a coupled model reuse this one."""
         self.case = case
-        self.mesh = build_mesh(case.mesh, comm, case_dir)
+        self.mesh = mesh if mesh is not None else build_mesh(case.mesh, comm, case_dir)
         self.gdim = self.mesh.geometry.dim
         tagged = tag_box_boundaries(self.mesh, case.mesh.lower, case.mesh.upper)
         self.h_min = min_cell_size(self.mesh)
@@ -98,8 +101,9 @@ class TwoPhaseModel:
         self.rho_cell = fem.Function(fem.FunctionSpace(self.mesh, ("DG", 0)), name="rho_cell")
         self.ns = NavierStokes(self.mesh, fl, case.run.dt, facet_tags=tagged.facet_tags,
                                boundary_names=tagged.names, rho=self.rho, mu=self.mu,
-                               pspg_density=self.rho_cell)
+                               pspg_density=self.rho_cell, **(ns_options or {}))
         self.u_adv = fem.Function(self.ns.V, name="u_advect")   # velocity seen by φ
+        self.advection_filter = None   # optional fn(u_adv array) editing it in place (coupled runs)
         self.h_interface = interface_cell_size(case, self.h_min)
         self.pf = PhaseField(self.mesh, case.phase_field, self.h_interface, self.u_adv,
                              gamma_velocity_scale(case), case.run.dt)
@@ -150,6 +154,8 @@ class TwoPhaseModel:
             first = ns.step_count == 0
             u_n = ns.U.x.array[vm]
             self.u_adv.x.array[:] = u_n if first else 1.5 * u_n - 0.5 * ns.U_n.x.array[vm]
+            if self.advection_filter is not None:
+                self.advection_filter(self.u_adv.x.array)
             phi_old = pf.phi.x.array.copy()
             self.pf_iterations = pf.advance(dt)
         with timer("properties"):

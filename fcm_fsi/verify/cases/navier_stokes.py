@@ -220,15 +220,17 @@ def cylinder_2d1_solution(comm, h_cyl: float, h_far: float):
 
 
 
-def plot_cylinder_convergence(rows, reference: dict, keys: tuple[str, ...], path) -> None:
+def plot_cylinder_convergence(rows, reference: dict, keys: tuple[str, ...], path,
+                              label: str = "P1/P1 reaction force", compare: dict | None = None) -> None:
     """c_D / c_L / Δp against mesh size (rows: (h, c_D, c_L, Δp, cells)) with the
-    Schäfer–Turek values; rank 0."""
+    Schäfer–Turek values; ``compare`` adds further series {label: rows}; rank 0."""
     plt = _plt()
     columns = {"c_D": 1, "c_L": 2, "dp": 3}
     fig, ax = plt.subplots(1, len(keys), figsize=(4 * len(keys), 3.4))
-    cells = [r[4] for r in rows]
+    series = {label: rows, **(compare or {})}
     for a, key in zip(ax, keys):
-        a.semilogx(cells, [r[columns[key]] for r in rows], "o-", label="P1/P1 reaction force")
+        for (name, rs), style in zip(series.items(), ("o-", "s--", "^:", "v-.")):
+            a.semilogx([r[4] for r in rs], [r[columns[key]] for r in rs], style, label=name)
         a.axhline(reference[key], color="k", ls="--", label="Schäfer–Turek")
         a.set_xlabel("cells"), a.set_title(key)
     ax[0].legend(fontsize=8)

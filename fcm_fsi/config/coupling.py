@@ -1,0 +1,31 @@
+"""Fluid ⇄ DEM coupling and the finite-cover cut (section ``coupling``; SPEC §1, §3)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from .fields import param
+
+
+@dataclass(frozen=True, kw_only=True)
+class CouplingConfig:
+    """How the DEM blocks cut the fluid mesh and exchange loads with it (docs/coupling.md)."""
+
+    penalty: float = param(1.0e4, doc="γ of the wall penalty p̄ = γ(μ/h + ρh/Δt); 10–1000 was measured unstable "
+                                      "where a free surface meets a block (docs/coupling.md)", gt=0, le=1e8)
+    fictitious_factor: float = param(1.0e-3, doc="α: the solid part of each cell carries the fluid equations "
+                                                 "scaled by α (keeps tiny cut cells regular)", gt=0, lt=1)
+    nitsche: bool = param(True, doc="add the symmetric Nitsche consistency terms to the penalty wall (without them the wall leaks: slip ≈ p/p̄ under a pressure p, docs/cut-domain.md)")
+    ghost_penalty: float = param(0.0, doc="γ_g of the ghost penalty on the facets of cut cells (0 = off; "
+                                          "docs/cut-domain.md)", ge=0, le=100)
+    force_mode: Literal["hold", "linear"] = param(
+        "hold", doc="fluid load over the DEM sub-steps: hold = constant; linear = ramp from the previous exchange")
+    added_mass: float = param(0.0, doc="C_a of the added-mass stabilisation: each block's DEM inertia is raised by "
+                                       "m̃ = C_a ρ_fluid V_block and the load by m̃ a of the previous fluid step "
+                                       "(exact when converged; needed when the block's added mass exceeds its own)",
+                              ge=0, le=20)
+    depth: float | None = param(None, unit="m", doc="2D fluid only: out-of-plane extent of the blocks; the "
+                                                   "per-unit-depth fluid force is multiplied by it", gt=0)
+    band: float | None = param(None, unit="m", doc="level-set band half-width (default 2 × the largest cell)", gt=0)
+    check_every: int = param(100, unit="steps", doc="compare the replicated DEM state across MPI ranks every this "
+                                                    "many fluid steps", ge=1)

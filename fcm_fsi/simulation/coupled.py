@@ -1,0 +1,341 @@
+"""Sub-cycled fluid ⇄ DEM coupling on one fixed mesh (SPEC §3 (a)–(f); issue #8).
+
+One fluid step tⁿ → tⁿ⁺¹ (stages as in the timing table):
+
+(a) **cut rebuild**: the level set of the blocks at their poses at tⁿ (``fcm.levelset``),
+    the moment-fitted cut weights and the wall velocity ū = v + ω × (x − x_c) of the
+    owning block at every node (``fcm.domain.CutDomain.update``);
+(b) **fluid**: phase field (two-phase cases) and Navier–Stokes on the cut domain, the
+    wall condition the penalty term on ū (explicit in the block motion);
+(c) **exchange**: force and torque of the fluid on each block from the wall traction on
+    its cut surface (2D fluids: per unit depth × ``coupling.depth``);
+(d) **dem sub-steps**: Δt_f/Δt_DEM explicit DEM steps with that load held (or ramped,
+    ``coupling.force_mode``), gravity, contacts and cohesive bonds as in a pure DEM run;
+(e) the new block velocities become the next step's ū.
+
+The DEM is replicated: every rank runs the same DEM on the same allreduced loads, and the
+states are compared by hash every ``coupling.check_every`` steps (plan for larger DEMs:
+``coupling/dem_side.py``).
+
+Momentum exchange (issue #8 item 3): ``exchange_error`` compares, per step, the impulse the
+DEM integrated over its sub-steps with the momentum the fluid's discrete equations received
+from the wall term (the assembled wall residual summed over all velocity dofs, i.e. tested
+with the constant unit vectors), relative to the larger of the two. It checks the whole
+chain (cell-to-body split, depth scaling, DEM load application) to round-off.
+
+Added mass: the coupling is explicit (staggered), which is unstable once the added mass
+of a block exceeds about its own mass (a floating box: m_a ≈ 1.6 m). ``coupling.added_mass``
+= C_a raises the DEM inertia of every block by m̃ = C_a ρ_f V_b (rotational inertia in the
+same ratio) and adds m̃ a (and Ĩ α) of the previous fluid step to the load, minus m̃ g so the
+weight is unchanged:  (m + m̃) aⁿ⁺¹ = F_fluid + m g + m̃ aⁿ. At a converged or steady motion
+this is exact; in a transient it lags by one fluid step, O(Δt ȧ).
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..config.case import Case
+from ..coupling.dem_side import DEMSubcycler, shapes_of_blocks
+from ..dem.model import build_system
+from ..fcm.domain import CutDomain
+from ..fcm.levelset import StructureLevelSet
+from ..io.logging import get_logger
+from ..io.timing import StageTimer
+from ..mesh.build import build_mesh, cell_sizes
+from .loop import SimulationDiverged
+
+log = get_logger("coupled")
+
+#: blocks whose pose/velocity/load columns go into series.csv (all blocks: bodies.csv)
+SERIES_BLOCKS = 4
+
+
+class CoupledModel:
+    """Fluid (single- or two-phase) on a cut mesh + replicated DEM; model protocol of :mod:`.loop`."""
+
+    def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None, out_dir: Path | None = None):
+        self.case, self.comm = case, comm
+        cp = case.coupling
+        self.mesh = build_mesh(case.mesh, comm, case_dir)
+        self.gdim = self.mesh.geometry.dim
+        self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, nitsche=cp.nitsche)
+        terms = [self.cut.penalty_term()]
+        if cp.ghost_penalty > 0:
+            terms.append(self.cut.ghost_penalty_term(cp.ghost_penalty))
+        ns_options = {"dx": self.cut.dx, "extra_terms": terms}
+        fluid_case = dataclasses.replace(case, fluid=dataclasses.replace(case.fluid, quadrature_degree=self.cut.degree))
+        if case.phase_field is not None:
+            from .two_phase import TwoPhaseModel
+            self.fluid = TwoPhaseModel(fluid_case, comm, case_dir, mesh=self.mesh, ns_options=ns_options)
+        else:
+            from .fluid import FluidModel
+            self.fluid = FluidModel(fluid_case, comm, case_dir, mesh=self.mesh, ns_options=ns_options)
+        self.ns = self.fluid.ns
+        self.h_min = self.fluid.h_min
+
+        self.system = build_system(case.dem)
+        self.dem = DEMSubcycler(self.system)
+        st = self.system.state
+        self.nb = st.nb
+        self.added_mass = self._add_mass(case)
+        self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
+        self.alpha_ang = np.zeros((self.nb, 3))
+        self.depth = 1.0 if self.gdim == 3 else float(cp.depth)
+        h_max = comm.allreduce(float(cell_sizes(self.mesh).max(initial=0.0)), op=MPI.MAX)
+        self.band = cp.band if cp.band is not None else 2.0 * h_max
+        self.levelset = StructureLevelSet(shapes_of_blocks(case.dem, st), self.nb, self.band)
+        self.points = np.zeros((self.cut.nodes.shape[0], 3))
+        self.points[:, : self.gdim] = self.cut.nodes[:, : self.gdim]
+        self.v_points = self.ns.V.tabulate_dof_coordinates()
+        self.v_fluid = np.ones(self.v_points.shape[0], bool)
+        self.v_rigid = np.zeros((self.v_points.shape[0], self.gdim))
+        if case.phase_field is not None:
+            self.fluid.advection_filter = self.rigid_inside
+        self._wall_form = None
+        self.force = np.zeros((self.nb, 3))
+        self.torque = np.zeros((self.nb, 3))
+        self.exchange_error = 0.0
+        self.stats = self.rebuild_cut()
+        self.output_functions = list(self.fluid.output_functions) + [self.cut.level_set]
+        self.series_units = {**self.fluid.series_units, "cut_cells": "-", "min_cut_fraction": "-",
+                             "dem_substeps": "-", "dem_dt_margin": "-", "exchange_error": "-",
+                             "force_x": "N", "force_y": "N", "force_z": "N"}
+        for b in range(min(self.nb, SERIES_BLOCKS)):
+            for key, unit in (("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"),
+                              ("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s")):
+                self.series_units[f"b{b}_{key}"] = unit
+        self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
+        if self.bonds is not None:
+            self.series_units["broken_bonds"] = "-"
+        self.bodies_csv = None
+        if out_dir is not None:
+            from ..io.csv import TimeSeriesCSV
+            cols = {"t": "s", "block": "-"}
+            for key, unit in (("x", "m"), ("y", "m"), ("z", "m"), ("qw", "-"), ("qx", "-"), ("qy", "-"),
+                              ("qz", "-"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"), ("wx", "rad/s"),
+                              ("wy", "rad/s"), ("wz", "rad/s"), ("fx", "N"), ("fy", "N"), ("fz", "N"),
+                              ("tx", "N m"), ("ty", "N m"), ("tz", "N m")):
+                cols[key] = unit
+            self.bodies_csv = TimeSeriesCSV(Path(out_dir) / "bodies.csv", cols, comm.rank, append=False)
+        log.info("coupled: %d blocks, %d spheres; DEM dt %.4g s; level-set band %.4g m; cut cells %d, "
+                 "smallest cut fraction %.2e", self.nb, st.ns, self.system.dt, self.band, self.stats.cut_cells,
+                 self.stats.min_cut_fraction)
+
+    def _add_mass(self, case: Case) -> np.ndarray:
+        """m̃ = C_a ρ_f V_b per block, V_b = m_b / ρ_material; raises mass and inertia."""
+        st = self.system.state
+        ca = case.coupling.added_mass
+        if ca == 0.0:
+            return np.zeros(self.nb)
+        dens = np.array([m.density for m in case.dem.materials])
+        rho_b = dens[st.sph_material[st.blk_sph_start[:-1]]]
+        extra = ca * case.fluid.density * st.mass / rho_b
+        extra[st.fixed] = 0.0
+        st.inertia *= (1.0 + extra / st.mass)[:, None]
+        st.mass += extra
+        log.info("added-mass stabilisation C_a = %g: block inertia raised by %s kg", ca,
+                 np.array2string(extra[:4], precision=4))
+        return extra
+
+    def _stabilised_load(self) -> tuple[np.ndarray, np.ndarray]:
+        """Fluid load + m̃ aⁿ − m̃ g and torque + R Ĩ Rᵀ αⁿ (body-frame Ĩ = I m̃/(m + m̃))."""
+        if not self.added_mass.any():
+            return self.force, self.torque
+        st = self.system.state
+        g = np.asarray(self.case.dem.gravity)
+        F = self.force + self.added_mass[:, None] * (self.accel - g[None, :])
+        R = st.rotation_matrices()
+        I_tilde = st.inertia * (self.added_mass / st.mass)[:, None]
+        body = np.einsum("bji,bj->bi", R, self.alpha_ang) * I_tilde
+        T = self.torque + np.einsum("bij,bj->bi", R, body)
+        return F, T
+
+    # -------------------------------------------------------------- stages
+    def rebuild_cut(self):
+        """(a): level set, cut weights and wall velocity from the current block poses."""
+        st = self.system.state
+        level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
+        ubar = self.dem.rigid_velocity(self.points, owner)
+        lv, ov = self.levelset.evaluate(self.v_points, st.pos, st.quat)
+        self.v_fluid = lv > 0
+        self.v_rigid = self.dem.rigid_velocity(self.v_points, ov)[:, : self.gdim]
+        return self.cut.update(level, owner, ubar[:, : self.gdim])
+
+    def rigid_inside(self, u_adv: np.ndarray) -> None:
+        """The phase field inside the blocks moves with them: u_adv = ū at the velocity nodes
+        inside (level set < 0), not the fictitious flow there."""
+        u = u_adv.reshape(-1, self.gdim)
+        u[~self.v_fluid] = self.v_rigid[~self.v_fluid]
+
+    def fluid_speed_max(self) -> float:
+        """max |u| over the velocity nodes in the fluid (level set > 0) [m/s]: the
+        fictitious flow inside the blocks limits neither the CFL step nor the report."""
+        u = self.ns.U.x.array[self.ns.V_map].reshape(-1, self.gdim)[self.v_fluid]
+        local = float(np.sqrt((u ** 2).sum(axis=1)).max(initial=0.0))
+        return self.comm.allreduce(local, op=MPI.MAX)
+
+    def _wall_momentum(self) -> np.ndarray:
+        """Momentum per unit time the fluid's equations receive from the wall term: the
+        assembled wall residual summed over the velocity dofs of each component (N)."""
+        if self._wall_form is None:
+            term = self.cut.penalty_term()(self.ns.parts)
+            self._wall_form = fem.form(term)
+        vec = fem.petsc.assemble_vector(self._wall_form)
+        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        owned = self.ns.V.dofmap.index_map.size_local
+        w_dofs = np.asarray(self.ns.V_map).reshape(-1, self.gdim)[:owned]
+        out = np.zeros(3)
+        out[: self.gdim] = vec.array[w_dofs].sum(axis=0)
+        vec.destroy()
+        return -self.comm.allreduce(out, op=MPI.SUM) * self.depth
+
+    def advance(self, t: float, dt: float, timer: StageTimer) -> None:
+        with timer("cut rebuild"):
+            self.stats = self.rebuild_cut()
+        self.fluid.advance(t, dt, timer)
+        with timer("exchange"):
+            st = self.system.state
+            centres = st.pos[:, : self.gdim] if self.gdim == 2 else st.pos
+            force, torque = self.cut.body_forces(self.nb, centres)
+            self.force[:] = 0.0
+            self.force[:, : self.gdim] = force * self.depth
+            self.torque[:] = torque * self.depth
+            fluid_side = self._wall_momentum()
+        with timer("dem sub-steps"):
+            # the last step before t_end may be a fraction of run.dt: take whole DEM steps no
+            # longer than dem.dt that fill it exactly
+            n_sub = int(np.ceil(dt / self.case.dem.dt * (1 - 1e-9)))
+            self.system.dt = dt / n_sub
+            v0, w0 = st.vel.copy(), st.omega.copy()
+            F, T = self._stabilised_load()
+            try:
+                self.dem.advance(dt, F, T, self.case.coupling.force_mode)
+            finally:
+                self.system.dt = self.case.dem.dt
+            self.accel[:] = (st.vel - v0) / dt
+            self.alpha_ang[:] = (st.omega - w0) / dt
+        self.exchange_error = self._exchange_error(dt, F - self.force, fluid_side)
+        self._check_dem(t + dt)
+        if self.ns.step_count % self.case.coupling.check_every == 0:
+            self.dem.check_replicated(self.comm)
+        self._write_bodies(t + dt)
+
+    def _exchange_error(self, dt: float, stabilisation: np.ndarray, fluid_side: np.ndarray) -> float:
+        """|fluid impulse the DEM integrated + momentum the fluid received| / scale, the
+        added-mass stabilisation taken out; the linear force mode compares trapezoids."""
+        ex = self.dem.last
+        linear = self.case.coupling.force_mode == "linear"
+        prev_stab, prev_fluid = getattr(self, "_prev_exchange", (np.zeros_like(stabilisation), fluid_side))
+        stab = 0.5 * (prev_stab + stabilisation) if linear else stabilisation
+        fluid = 0.5 * (prev_fluid + fluid_side) if linear else fluid_side
+        self._prev_exchange = (stabilisation.copy(), fluid_side.copy())
+        dem_side = (ex.impulse - dt * stab).sum(axis=0) / dt
+        scale = max(np.abs(dem_side).max(), np.abs(fluid).max(), 1e-300)
+        return float(np.abs(dem_side + fluid).max() / scale)
+
+    def _check_dem(self, t: float) -> None:
+        """Stop with the body, its load and velocity when the DEM state is not finite or a
+        block moved more than a band width in one fluid step (the cut could not follow)."""
+        st = self.system.state
+        speed = np.linalg.norm(st.vel, axis=1)
+        bad = ~np.isfinite(st.pos).all(axis=1) | ~np.isfinite(st.vel).all(axis=1)
+        fast = speed * self.fluid.last_dt > self.band
+        for b in np.flatnonzero(bad | fast):
+            raise SimulationDiverged(
+                f"t = {t:.6g} s: block {b} {'is not finite' if bad[b] else 'moved more than the level-set band'}"
+                f": fluid force {np.array2string(self.force[b], precision=4)} N, velocity "
+                f"{np.array2string(st.vel[b], precision=4)} m/s, DEM dt/Δt_cr {self.dem.last.dt_over_dt_cr:.3f}, "
+                f"fluid dt {self.fluid.last_dt:.4g} s (band {self.band:.4g} m)")
+
+    def _write_bodies(self, t: float) -> None:
+        if self.bodies_csv is None:
+            return
+        st = self.system.state
+        for b in range(self.nb):
+            row = {"t": t, "block": b}
+            for k, key in enumerate("xyz"):
+                row[key] = st.pos[b, k]
+                row[f"v{key}"] = st.vel[b, k]
+                row[f"w{key}"] = st.omega[b, k]
+                row[f"f{key}"] = self.force[b, k]
+                row[f"t{key}"] = self.torque[b, k]
+            for k, key in enumerate(("qw", "qx", "qy", "qz")):
+                row[key] = st.quat[b, k]
+            self.bodies_csv.write(**row)
+
+    # ------------------------------------------------------- loop protocol
+    @property
+    def last_dt(self) -> float:
+        return self.fluid.last_dt
+
+    def stable_dt(self, cfl: float) -> float:
+        """The fluid's CFL step, also limited so no block moves more than ¼ of the band,
+        rounded down to a whole number of DEM steps."""
+        st = self.system.state
+        vmax = float(np.linalg.norm(st.vel, axis=1).max(initial=0.0))
+        umax = self.fluid_speed_max()
+        dt = cfl * self.h_min / umax if umax > 0 else np.inf
+        if vmax > 0:
+            dt = min(dt, 0.25 * self.band / vmax)
+        dem_dt = self.case.dem.dt
+        return max(np.floor(dt / dem_dt * (1 + 1e-9)), 1.0) * dem_dt if np.isfinite(dt) else dt
+
+    def diagnostics(self) -> dict[str, float]:
+        diag = self.fluid.diagnostics()
+        umax = self.fluid_speed_max()
+        diag["u_max"], diag["cfl"] = umax, umax * self.last_dt / self.h_min
+        st = self.system.state
+        ex = self.dem.last
+        diag.update({"cut_cells": float(self.stats.cut_cells), "min_cut_fraction": self.stats.min_cut_fraction,
+                     "dem_substeps": float(ex.n_sub if ex else 0), "dem_dt_margin": float(ex.dt_over_dt_cr if ex else 0),
+                     "exchange_error": self.exchange_error})
+        total = self.force.sum(axis=0)
+        diag.update({"force_x": total[0], "force_y": total[1], "force_z": total[2]})
+        for b in range(min(self.nb, SERIES_BLOCKS)):
+            for k, key in enumerate("xyz"):
+                diag[f"b{b}_{key}"] = st.pos[b, k]
+                diag[f"b{b}_v{key}"] = st.vel[b, k]
+                diag[f"b{b}_w{key}"] = st.omega[b, k]
+        if self.bonds is not None:
+            diag["broken_bonds"] = float(np.count_nonzero(self.bonds.broken_bonds()))
+        return diag
+
+    def health(self, diag: dict[str, float]) -> str | None:
+        return self.fluid.health(diag)
+
+    def state(self):
+        fields, globals_ = self.fluid.state()
+        st = self.system.state
+        for name, a in st.arrays().items():
+            globals_[f"dem__{name}"] = a
+        globals_["dem__time"] = np.array([st.t, float(st.step)])
+        for k, it in enumerate(self.system.interactions):
+            if hasattr(it, "checkpoint_arrays"):
+                for name, a in it.checkpoint_arrays().items():
+                    globals_[f"dem_int{k}__{name}"] = a
+        globals_["coupling__accel"] = np.concatenate([self.accel, self.alpha_ang])
+        if self.system.ledger is not None:
+            globals_["dem__ledger"] = self.system.ledger.checkpoint_arrays()["ledger"]
+        return fields, globals_
+
+    def load_state(self, checkpoint) -> None:
+        self.fluid.load_state(checkpoint)
+        g = checkpoint.globals
+        st = self.system.state
+        for name, a in st.arrays().items():
+            a[...] = g[f"dem__{name}"]
+        st.t, st.step = float(g["dem__time"][0]), int(g["dem__time"][1])
+        self.accel[:], self.alpha_ang[:] = g["coupling__accel"][: self.nb], g["coupling__accel"][self.nb:]
+        for k, it in enumerate(self.system.interactions):
+            if hasattr(it, "restore"):
+                prefix = f"dem_int{k}__"
+                it.restore({n[len(prefix):]: a for n, a in g.items() if n.startswith(prefix)})
+        if self.system.ledger is not None and "dem__ledger" in g:
+            self.system.ledger.restore({"ledger": g["dem__ledger"]})
+        self.stats = self.rebuild_cut()
