@@ -15,9 +15,10 @@ class CouplingConfig:
                                       "where a free surface meets a block (docs/coupling.md)", gt=0, le=1e8)
     fictitious_factor: float = param(1.0e-3, doc="α: the solid part of each cell carries the fluid equations "
                                                  "scaled by α (keeps tiny cut cells regular)", gt=0, lt=1)
-    nitsche: bool = param(True, doc="add the symmetric Nitsche consistency terms to the penalty wall (without them the wall leaks: slip ≈ p/p̄ under a pressure p, docs/cut-domain.md)")
-    ghost_penalty: float = param(0.0, doc="γ_g of the ghost penalty on the facets of cut cells (0 = off; "
-                                          "docs/cut-domain.md)", ge=0, le=100)
+    wall: Literal["penalty", "pressure", "nitsche"] = param(
+        "pressure", doc="wall terms on Γ: penalty (the paper's; leaks under pressure: slip ≈ p/p̄); pressure: "
+                        "penalty + the pressure part of the wall traction (no leak, stable for any cut); nitsche: "
+                        "full symmetric Nitsche (needs p̄ ≳ μ/(f h) in cut cells of fluid fraction f)")
     force_mode: Literal["hold", "linear"] = param(
         "hold", doc="fluid load over the DEM sub-steps: hold = constant; linear = ramp from the previous exchange")
     added_mass: float = param(0.0, doc="C_a of the added-mass stabilisation: each block's DEM inertia is raised by "

@@ -44,6 +44,11 @@ from mpi4py import MPI
 from ..fluid.navier_stokes import cell_size
 from .moments import fitted_weights
 
+#: wall conditions on Γ (module docstring): the paper's penalty; penalty + the pressure part of
+#: the wall traction (consistent for a fluid at rest: no leak under hydrostatic pressure, and
+#: stable for any cut since the added pressure terms are skew); full symmetric Nitsche
+WALL_TERMS = ("penalty", "pressure", "nitsche")
+
 #: quadrature degree of all fluid forms on a cut mesh: the smallest standard rule with at
 #: least as many points as monomials of degree ≤ 2 (2D: 7 points ≥ 6; 3D: 14 points ≥ 10)
 CUT_QUADRATURE_DEGREE = {2: 5, 3: 4}
@@ -78,8 +83,10 @@ class CutDomain:
     penalty: γ of the penalty scaling (module docstring).
     """
 
-    def __init__(self, mesh, alpha: float = 1e-3, penalty: float = 100.0, nitsche: bool = False) -> None:
-        self.mesh, self.comm, self.nitsche = mesh, mesh.comm, nitsche
+    def __init__(self, mesh, alpha: float = 1e-3, penalty: float = 100.0, wall: str = "pressure") -> None:
+        if wall not in WALL_TERMS:
+            raise ValueError(f"wall = {wall!r}; allowed: {', '.join(WALL_TERMS)}")
+        self.mesh, self.comm, self.wall = mesh, mesh.comm, wall
         self.alpha, self.gamma = float(alpha), float(penalty)
         tdim = mesh.topology.dim
         self.gdim = mesh.geometry.dim
@@ -114,8 +121,6 @@ class CutDomain:
         self.fluid_measure = np.zeros(ncells)
         self.surface_measure = np.zeros(ncells)
         self.h = cell_size(mesh)
-        self.cut_indicator = fem.Function(self.h.function_space, name="cut_cell")
-        self._dg0_dofs = self.h.function_space.dofmap.list.array
         self._force_forms = None
 
     # ----------------------------------------------------------------- update
@@ -138,8 +143,6 @@ class CutDomain:
         bs = self.V1.dofmap.index_map_bs
         for d in range(self.gdim):
             self.wall_velocity.x.array[bs * self.node_to_dof + d] = wall_velocity[:, d]
-        cut = (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
-        self.cut_indicator.x.array[self._dg0_dofs] = cut.astype(float)
         # a cell belongs to the body owning its deepest vertex
         deepest = np.argmin(values, axis=1)
         self.cell_owner = owner[self.geom_cells[np.arange(len(values)), deepest]]
@@ -171,49 +174,29 @@ class CutDomain:
 
     def wall_traction(self, parts):
         """Traction the wall exerts on the fluid per unit area, t_w, so that the body feels −t_w:
-        penalty: −p̄(u − ū); Nitsche: σ(u_θ, p)n − p̄(u − ū)."""
+        penalty: −p̄(u − ū); pressure: −p n − p̄(u − ū); nitsche: σ(u_θ, p)n − p̄(u − ū)."""
         t = -self._pbar * (parts.u - self.wall_velocity)
-        if self.nitsche:
-            n = self.wall_normal()
-            t = t + 2 * parts.mu * ufl.dot(ufl.sym(ufl.grad(parts.u_theta)), n) - parts.p * n
+        if self.wall != "penalty":
+            t = t - parts.p * self.wall_normal()
+        if self.wall == "nitsche":
+            t = t + 2 * parts.mu * ufl.dot(ufl.sym(ufl.grad(parts.u_theta)), self.wall_normal())
         return t
 
     def penalty_term(self):
-        """The NS extra term of the wall (pass as ``extra_terms=[...]``):
-        penalty ∫_Γ p̄ (u − ū)·w dΓ on u^{n+1}; with ``nitsche`` also the consistency terms
-        −∫_Γ σ(u_θ, p)n·w dΓ − ∫_Γ (2μ ε(w)n + q n)·(u − ū) dΓ (symmetric Nitsche)."""
+        """The NS extra term of the wall (pass as ``extra_terms=[...]``): −∫_Γ t_w·w dΓ with
+        t_w of :meth:`wall_traction`, plus the adjoint terms that keep the pressure coupling
+        skew (``pressure``: −∫_Γ q n·(u − ū) dΓ) or make the viscous part symmetric
+        (``nitsche``: −∫_Γ (2μ ε(w)n + q n)·(u − ū) dΓ)."""
         def term(parts):
             self._pbar = self.penalty_coefficient(parts, self.h)
             self._parts = parts
             F = -ufl.inner(self.wall_traction(parts), parts.w) * self.dGamma
-            if self.nitsche:
-                n = self.wall_normal()
-                adj = 2 * parts.mu * ufl.dot(ufl.sym(ufl.grad(parts.w)), n) + parts.q * n
+            if self.wall != "penalty":
+                adj = parts.q * self.wall_normal()
+                if self.wall == "nitsche":
+                    adj = adj + 2 * parts.mu * ufl.dot(ufl.sym(ufl.grad(parts.w)), self.wall_normal())
                 F = F - ufl.inner(adj, parts.u - self.wall_velocity) * self.dGamma
             return F
-        return term
-
-    def ghost_penalty_term(self, gamma: float):
-        """Ghost penalty on the facets of cut cells (Burman 2010): the jumps of the normal
-        derivatives of u and p across every facet touching a cut cell,
-
-            γ_g Σ_F ∫_F h [(μ + ρh²/Δt)[∂ₙu]·[∂ₙw] + (τ/ρ)[∂ₙp][∂ₙq]] dS,
-
-        extend the fields of a cell with a tiny fluid part smoothly from its neighbours, so
-        the wall flux σ(u, p)n that Nitsche's term takes from that cell is controlled
-        whatever the cut. Consistent: the jumps vanish for smooth (P1-continuous-gradient) fields."""
-        def term(parts):
-            n = ufl.FacetNormal(self.mesh)
-            chi = ufl.max_value(self.cut_indicator("+"), self.cut_indicator("-"))
-            hF = ufl.avg(self.h)
-            visc = ufl.avg(parts.mu) + ufl.avg(parts.rho) * hF ** 2 / parts.dt
-            press = ufl.avg(parts.tau_supg / parts.rho)
-            dS = ufl.Measure("dS", domain=self.mesh, metadata={"quadrature_degree": 2})
-            du = ufl.jump(ufl.grad(parts.u), n)
-            dw = ufl.jump(ufl.grad(parts.w), n)
-            dp = ufl.jump(ufl.grad(parts.p), n)
-            dq = ufl.jump(ufl.grad(parts.q), n)
-            return gamma * chi * hF * (visc * ufl.inner(du, dw) + press * dp * dq) * dS
         return term
 
     def _build_force_forms(self):

@@ -64,11 +64,8 @@ class CoupledModel:
         cp = case.coupling
         self.mesh = build_mesh(case.mesh, comm, case_dir)
         self.gdim = self.mesh.geometry.dim
-        self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, nitsche=cp.nitsche)
-        terms = [self.cut.penalty_term()]
-        if cp.ghost_penalty > 0:
-            terms.append(self.cut.ghost_penalty_term(cp.ghost_penalty))
-        ns_options = {"dx": self.cut.dx, "extra_terms": terms}
+        self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, wall=cp.wall)
+        ns_options = {"dx": self.cut.dx, "extra_terms": [self.cut.penalty_term()]}
         fluid_case = dataclasses.replace(case, fluid=dataclasses.replace(case.fluid, quadrature_degree=self.cut.degree))
         if case.phase_field is not None:
             from .two_phase import TwoPhaseModel
@@ -97,6 +94,7 @@ class CoupledModel:
         self.v_rigid = np.zeros((self.v_points.shape[0], self.gdim))
         if case.phase_field is not None:
             self.fluid.advection_filter = self.rigid_inside
+
         self._wall_form = None
         self.force = np.zeros((self.nb, 3))
         self.torque = np.zeros((self.nb, 3))

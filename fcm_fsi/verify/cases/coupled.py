@@ -22,15 +22,18 @@ from mpi4py import MPI
 
 from ...config import case_from_dict
 from ...simulation.coupled import CoupledModel
-from ...simulation.loop import TimeLoop
-from ..registry import Metric, at_most, register, rel_error_metric, report_only
+from ...io.logging import get_logger
+from ...simulation.loop import SimulationDiverged, TimeLoop
+from ..registry import Metric, at_least, at_most, register, rel_error_metric, report_only
 from .phase_field import read_series
 
+log = get_logger("verify")
 CASES = Path(__file__).resolve().parents[3] / "cases"
 
 
-def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.ndarray], float]:
-    """Run a coupled case mapping; returns its series (all ranks) and the wall time [s]."""
+def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.ndarray], float, str | None]:
+    """Run a coupled case mapping; returns its series (all ranks), the wall time [s] and the
+    divergence message (None when the run reached t_end)."""
     case = case_from_dict(data, source=data["name"])
     sub = out / data["name"]
     if comm.rank == 0:
@@ -38,9 +41,14 @@ def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.nda
     comm.barrier()
     t0 = time.perf_counter()
     model = CoupledModel(case, comm, out_dir=sub)
-    TimeLoop(case, model, sub, comm, restart=None).run()
+    failure = None
+    try:
+        TimeLoop(case, model, sub, comm, restart=None).run()
+    except SimulationDiverged as err:
+        failure = str(err)
+        log.error("%s diverged: %s", data["name"], failure)
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
-    return read_series(sub / "series.csv"), wall
+    return read_series(sub / "series.csv"), wall, failure
 
 
 def settled_mean(t, draft, y, window: float) -> tuple[float, float]:
@@ -75,7 +83,7 @@ def floating_box(level, out_dir: Path, comm) -> list[Metric]:
     if level == "quick":
         data["run"]["t_end"] = 3.0
         data["mesh"]["cells"] = [50, 25]
-    series, wall = run_coupled(data, out_dir, comm)
+    series, wall, failure = run_coupled(data, out_dir, comm)
     blk = data["dem"]["blocks"][0]
     width, height = blk["size"][0], blk["size"][1]
     rho_w, rho_a = data["fluid"]["density"], data["fluid"]["gas_density"]
@@ -92,7 +100,12 @@ def floating_box(level, out_dir: Path, comm) -> list[Metric]:
     period = heave_period(t, y, y_eq)
     if comm.rank == 0:
         _plot(out_dir, t, draft, draft_ref, period, t_est)
-    return [rel_error_metric("draft_rel_error", d_end, draft_ref, 0.02),
+    t_reached = float(t[-1])
+    if failure is not None:
+        d_end = period = float("nan")
+    return [at_least("completed", float(failure is None), 1.0),
+            report_only("t_reached", t_reached, note=f"of t_end {data['run']['t_end']} s"),
+            rel_error_metric("draft_rel_error", d_end, draft_ref, 0.02),
             report_only("heave_period", period, reference=float(t_est),
                         note="zero crossings of the centre height; reference: hydrostatic + flat-plate added mass"),
             at_most("exchange_error", float(series["exchange_error"].max()), 1e-10),
