@@ -94,6 +94,7 @@ class CoupledModel:
         self.v_rigid = np.zeros((self.v_points.shape[0], self.gdim))
         if case.phase_field is not None:
             self.fluid.advection_filter = self.rigid_inside
+            self.fluid.cell_density = self.fluid_part_density
 
         self._wall_form = None
         self.force = np.zeros((self.nb, 3))
@@ -164,6 +165,20 @@ class CoupledModel:
         self.v_fluid = lv > 0
         self.v_rigid = self.dem.rigid_velocity(self.v_points, ov)[:, : self.gdim]
         return self.cut.update(level, owner, ubar[:, : self.gdim])
+
+    def fluid_part_density(self, rho, rho_cell) -> None:
+        """Cell-mean ρ of the PSPG test function over the cell's (weighted) fluid part, not
+        its midpoint: a cut cell whose fluid part is air must not take the water carried in
+        its fictitious part, nor the reverse."""
+        if not hasattr(self, "_rho_forms"):
+            import ufl
+            v0 = ufl.TestFunction(rho_cell.function_space)
+            self._rho_forms = (fem.form(rho * v0 * self.cut.dx), fem.form(v0 * self.cut.dx))
+        num = fem.petsc.assemble_vector(self._rho_forms[0])
+        den = fem.petsc.assemble_vector(self._rho_forms[1])
+        rho_cell.x.array[: len(num.array)] = num.array / den.array
+        rho_cell.x.scatter_forward()
+        num.destroy(), den.destroy()
 
     def rigid_inside(self, u_adv: np.ndarray) -> None:
         """The phase field inside the blocks moves with them: u_adv = ū at the velocity nodes

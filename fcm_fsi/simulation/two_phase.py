@@ -108,6 +108,7 @@ class TwoPhaseModel:
         self.pf = PhaseField(self.mesh, case.phase_field, self.h_interface, self.u_adv,
                              gamma_velocity_scale(case), case.run.dt)
         self.pf.set_initial(case.phase_field.initial)
+        self.cell_density = None   # optional fn(rho, rho_cell) setting the cell means (coupled runs)
         self.update_properties(self.pf.phi.x.array)
         self.u_out = fem.Function(self.ns.V, name="u")
         self.p_out = fem.Function(self.ns.Q, name="p")
@@ -144,7 +145,10 @@ class TwoPhaseModel:
         fl = self.case.fluid
         self.rho.x.array[:] = property_map(phi_values, fl.density, fl.gas_density)
         self.mu.x.array[:] = property_map(phi_values, fl.viscosity, fl.gas_viscosity)
-        self.rho_cell.interpolate(self.rho)   # cell mean of the P1 ρ (midpoint value)
+        if self.cell_density is not None:
+            self.cell_density(self.rho, self.rho_cell)
+        else:
+            self.rho_cell.interpolate(self.rho)   # cell mean of the P1 ρ (midpoint value)
 
     # -------------------------------------------------------------- time step
     def advance(self, t: float, dt: float, timer: StageTimer) -> None:
