@@ -66,6 +66,10 @@ class FluidConfig:
         "newton", doc="newton: exact Jacobian with τ frozen per iteration; picard: advecting velocity frozen (Oseen)")
     rtol: float = param(1.0e-8, doc="nonlinear stop: ‖R‖ ≤ max(rtol·‖R₀‖, atol) each step", gt=0, lt=1)
     atol: float = param(1.0e-10, doc="absolute residual tolerance of the nonlinear iteration", gt=0)
+    tau_freeze: float = param(0.0, doc="keep τ (eqs 6–10) fixed for the rest of a step once the residual has dropped "
+                                      "by this factor (0 = recompute every iteration: the step solves the equations "
+                                      "with τ(uⁿ⁺¹) exactly; e.g. 1e-3 stops Newton cycling when the switch of eq 10 "
+                                      "flips, τ then lags the converged iterate slightly)", ge=0, lt=1)
     max_iterations: int = param(25, doc="nonlinear iterations per step before the run stops with an error", ge=1)
     quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
     pressure_reference: tuple[float, ...] | None = param(

@@ -155,11 +155,6 @@ class StepInfo:
     solve_seconds: float = 0.0      # linear solves (this rank)
 
 
-#: τ follows the iterate until the residual has dropped by this factor, then stays frozen for
-#: the remaining iterations of the step: recomputing it every iteration can make Newton cycle
-#: at the 1e-5 level when the switch of eq 10 (Re_e ≤ 3) flips in a few cells.
-TAU_FREEZE = 1e-3
-
 ExtraTerm = Callable[[FormParts], "ufl.Form"]
 
 
@@ -401,7 +396,7 @@ class NavierStokes:
         r0 = None
         for it in range(cfg.max_iterations + 1):
             t0 = time.perf_counter()
-            if r0 is None or info.residuals[-1] > TAU_FREEZE * r0:
+            if r0 is None or info.residuals[-1] > cfg.tau_freeze * r0:
                 self.update_tau()
             r = self._assemble_residual()
             info.assembly_seconds += time.perf_counter() - t0
