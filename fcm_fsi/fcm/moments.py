@@ -105,6 +105,16 @@ def _add_simplex_moments(pts, centre, scale, sign, m, tmp):
 
 
 @numba.njit(cache=True)
+def _fluid_vertices(s):
+    """Number of vertices on the fluid side (s ≥ 0)."""
+    n = 0
+    for i in range(s.shape[0]):
+        if s[i] >= 0.0:
+            n += 1
+    return n
+
+
+@numba.njit(cache=True)
 def _edge_point(xa, xb, sa, sb):
     return xa + sa / (sa - sb) * (xb - xa)
 
@@ -116,10 +126,7 @@ def _cut_moments(x, s, centre, scale, mv, ms, tmp):
     nv = x.shape[0]
     mv[:] = 0.0
     ms[:] = 0.0
-    npos = 0
-    for i in range(nv):
-        if s[i] >= 0.0:
-            npos += 1
+    npos = _fluid_vertices(s)
     full = _measure(x)
     if npos == nv:
         _add_simplex_moments(x, centre, scale, 1.0, mv, tmp)
@@ -218,10 +225,7 @@ def fitted_weights(coords, values, ref_points, ref_weights):
     for c in range(n):
         x = coords[c]
         s = values[c]
-        npos = 0
-        for i in range(nv):
-            if s[i] >= 0.0:
-                npos += 1
+        npos = _fluid_vertices(s)
         full = _measure(x)
         if npos == nv:
             cv[c, :] = 1.0

@@ -20,12 +20,12 @@ import numpy as np
 import yaml
 from mpi4py import MPI
 
-from ...config import case_from_dict
 from ...simulation.coupled import CoupledModel
 from ...io.logging import get_logger
 from ...simulation.loop import SimulationDiverged, TimeLoop
 from ..registry import Metric, at_least, at_most, register, rel_error_metric, report_only
 from .phase_field import read_series
+from .two_phase import case_output
 
 log = get_logger("verify")
 CASES = Path(__file__).resolve().parents[3] / "cases"
@@ -34,11 +34,7 @@ CASES = Path(__file__).resolve().parents[3] / "cases"
 def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.ndarray], float, str | None]:
     """Run a coupled case mapping; returns its series (all ranks), the wall time [s] and the
     divergence message (None when the run reached t_end)."""
-    case = case_from_dict(data, source=data["name"])
-    sub = out / data["name"]
-    if comm.rank == 0:
-        sub.mkdir(parents=True, exist_ok=True)
-    comm.barrier()
+    case, sub = case_output(data, out, comm)
     t0 = time.perf_counter()
     model = CoupledModel(case, comm, out_dir=sub)
     failure = None

@@ -36,13 +36,19 @@ def slip_walls(names=("left", "right", "bottom", "top"), kind="slip") -> list[di
     return [{"boundary": n, "kind": kind} for n in names]
 
 
-def run_two_phase(data: dict, out: Path, comm: MPI.Comm) -> tuple[TwoPhaseModel, dict[str, np.ndarray], float]:
-    """Run a two-phase case mapping; returns the model, its series (all ranks) and the wall time [s]."""
+def case_output(data: dict, out: Path, comm: MPI.Comm):
+    """(case, its output folder out/name, created on rank 0) for a case mapping."""
     case = case_from_dict(data, source=data["name"])
     sub = out / data["name"]
     if comm.rank == 0:
         sub.mkdir(parents=True, exist_ok=True)
     comm.barrier()
+    return case, sub
+
+
+def run_two_phase(data: dict, out: Path, comm: MPI.Comm) -> tuple[TwoPhaseModel, dict[str, np.ndarray], float]:
+    """Run a two-phase case mapping; returns the model, its series (all ranks) and the wall time [s]."""
+    case, sub = case_output(data, out, comm)
     t0 = time.perf_counter()
     model = TwoPhaseModel(case, comm)
     TimeLoop(case, model, sub, comm, restart=None).run()
