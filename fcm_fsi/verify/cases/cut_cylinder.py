@@ -3,8 +3,9 @@
 The channel is meshed without the cylinder hole (``mesh.channel.channel_unfitted``); the
 cylinder is a level set of the structure (``fcm.levelset``: a capped ``Shapes.cylinder``
 carried by body 0 at rest) and is cut out by ``fcm.domain.CutDomain``: moment-fitted
-quadrature on the fluid part of cut cells, fictitious factor α on the solid part, penalty
-wall p̄ = γ(μ/h + ρh/Δt) on Γ. Drag and lift are the penalty traction on Γ
+quadrature on the fluid part of cut cells, fictitious factor α on the solid part, the
+default (``pressure``) wall terms with p̄ = γ(μ/h + ρh/Δt) on Γ. Drag and lift are the wall
+traction on Γ
 (``CutDomain.body_forces``), Δp the P1 pressure at the front and back points of the
 cylinder (points on Γ, inside cut cells).
 
@@ -108,7 +109,7 @@ def _row(h_cyl: float, r: dict, wall: float) -> tuple:
 
 
 # ------------------------------------------------------------------------ 2D-1
-@register("cylinder_2d1_cut", "Schäfer–Turek 2D-1 on an unfitted mesh (finite-cover cut, penalty wall): "
+@register("cylinder_2d1_cut", "Schäfer–Turek 2D-1 on an unfitted mesh (finite-cover cut, pressure wall): "
           "drag, pressure drop", issue=5)
 def cylinder_2d1_cut(level, out_dir: Path, comm) -> list[Metric]:
     levels = [(0.005, 0.02)] if level == "quick" else [(0.01, 0.04), (0.005, 0.02), (0.0025, 0.01)]
@@ -128,7 +129,7 @@ def cylinder_2d1_cut(level, out_dir: Path, comm) -> list[Metric]:
         for r in fitted:
             print(f"  fitted h_cyl {r[0]:<7g} cells {r[4]:>6d}  c_D {r[1]:.5f}  c_L {r[2]:.5f}  dp {r[3]:.5f}  {r[5]:.1f} s")
         plot_cylinder_convergence(rows, ST_2D1, ("c_D", "c_L", "dp"), out_dir / "cylinder_2d1_cut_convergence.png",
-                                  label="cut (penalty traction)",
+                                  label="cut (wall traction)",
                                   compare={"body-fitted (reaction)": fitted} if fitted else None)
     h_cyl = levels[-1][0]
     metrics = [rel_error_metric("c_D", last["c_D"], ST_2D1["c_D"], 0.02),
@@ -148,7 +149,7 @@ def cylinder_2d1_cut(level, out_dir: Path, comm) -> list[Metric]:
 CUT_3D_LEVELS = {"quick": [(0.02, 0.06)], "full": [(0.02, 0.06), (0.015, 0.045), (0.01, 0.03)]}
 
 
-@register("cylinder_3d1z_cut", "Schäfer–Turek 3D-1Z on an unfitted mesh (finite-cover cut, penalty wall): "
+@register("cylinder_3d1z_cut", "Schäfer–Turek 3D-1Z on an unfitted mesh (finite-cover cut, pressure wall): "
           "drag, pressure drop", issue=5)
 def cylinder_3d1z_cut(level, out_dir: Path, comm) -> list[Metric]:
     from ...fluid.solvers import ITERATIVE_3D
@@ -163,7 +164,7 @@ def cylinder_3d1z_cut(level, out_dir: Path, comm) -> list[Metric]:
             print(f"  cut h_cyl {r[0]:<7g} cells {r[4]:>7d}  c_D {r[1]:.5f}  c_L {r[2]:.5f}  dp {r[3]:.5f}  {r[5]:.1f} s")
         if len(rows) > 1:
             plot_cylinder_convergence(rows, ST_3D1Z, ("c_D", "dp"), out_dir / "cylinder_3d1z_cut_convergence.png",
-                                      label="cut (penalty traction)")
+                                      label="cut (wall traction)")
     return [rel_error_metric("c_D", last["c_D"], ST_3D1Z["c_D"], 0.03),
             rel_error_metric("dp", last["dp"], ST_3D1Z["dp"], 0.03),
             report_only("c_L", last["c_L"], reference=ST_3D1Z["c_L"], note="no target in issue #5"),
