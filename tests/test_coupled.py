@@ -75,3 +75,30 @@ def test_one_and_two_ranks_agree(tmp_path):
     # same DEM on every rank; the fluid differs only by solver round-off between partitions
     assert np.abs(a["b0_y"] - b["b0_y"]).max() < 1e-9
     assert np.abs(a["force_y"] - b["force_y"]).max() < 1e-6 * np.abs(a["force_y"]).max()
+
+
+def test_failed_step_is_retaken_as_two_half_steps():
+    """A fluid failure restores the step and retakes it as two halves (same end time, DEM
+    steps twice 10 instead of once 20)."""
+    from mpi4py import MPI
+
+    from fcm_fsi.io.timing import StageTimer
+    from fcm_fsi.simulation.coupled import CoupledModel
+    from fcm_fsi.simulation.loop import SimulationDiverged
+
+    model = CoupledModel(case_from_dict(coarse_case()), MPI.COMM_WORLD)
+    real, calls = model.fluid.advance, []
+
+    def failing_once(t, dt, timer):
+        calls.append(dt)
+        if len(calls) == 1:
+            real(t, dt, timer)                       # leave a half-updated state behind
+            raise SimulationDiverged("injected failure")
+        real(t, dt, timer)
+    model.fluid.advance = failing_once
+    model.advance(0.0, 0.002, StageTimer())
+    assert calls == [0.002, 0.001, 0.001]
+    assert model.retried == 1
+    assert model.system.state.t == pytest.approx(0.002, abs=1e-15)
+    assert model.system.state.step == 20
+    assert model.ns.step_count == 2 and model.ns.t == pytest.approx(0.002)

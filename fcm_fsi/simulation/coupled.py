@@ -45,6 +45,7 @@ from ..coupling.dem_side import DEMSubcycler, shapes_of_blocks
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain
 from ..fcm.levelset import StructureLevelSet
+from ..fluid.solvers import LinearSolveError
 from ..io.logging import get_logger
 from ..io.timing import StageTimer
 from ..mesh.build import build_mesh, cell_sizes
@@ -100,10 +101,11 @@ class CoupledModel:
         self.force = np.zeros((self.nb, 3))
         self.torque = np.zeros((self.nb, 3))
         self.exchange_error = 0.0
+        self.retried = 0          # steps retaken as two half steps after a failed fluid solve
         self.stats = self.rebuild_cut()
         self.output_functions = list(self.fluid.output_functions) + [self.cut.level_set]
         self.series_units = {**self.fluid.series_units, "cut_cells": "-", "min_cut_fraction": "-",
-                             "dem_substeps": "-", "dem_dt_margin": "-", "exchange_error": "-",
+                             "dem_substeps": "-", "dem_dt_margin": "-", "exchange_error": "-", "retried_steps": "-",
                              "force_x": "N", "force_y": "N", "force_z": "N"}
         for b in range(min(self.nb, SERIES_BLOCKS)):
             for key, unit in (("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"),
@@ -208,7 +210,62 @@ class CoupledModel:
         vec.destroy()
         return -self.comm.allreduce(out, op=MPI.SUM) * self.depth
 
-    def advance(self, t: float, dt: float, timer: StageTimer) -> None:
+    def advance(self, t: float, dt: float, timer: StageTimer, retries: int = 2) -> None:
+        """One coupled step; when its fluid solve fails, the step is restored and retaken as two
+        half steps (at most ``retries`` halvings, then the failure stops the run)."""
+        snap = self._snapshot()
+        try:
+            self._advance(t, dt, timer)
+        except (SimulationDiverged, LinearSolveError, FloatingPointError) as err:
+            n_sub = dt / self.case.dem.dt
+            if retries == 0 or n_sub < 2 - 1e-9 or abs(n_sub / 2 - round(n_sub / 2)) > 1e-9:
+                raise
+            log.warning("t = %.6g s: %s — retrying as two steps of %.4g s", t, str(err).split(";")[0], dt / 2)
+            self._restore(snap)
+            self.retried += 1
+            self.advance(t, dt / 2, timer, retries - 1)
+            self.advance(t + dt / 2, dt / 2, timer, retries - 1)
+
+    def _snapshot(self) -> dict:
+        """Everything one step changes, as local copies (ghosts included)."""
+        ns, st = self.ns, self.system.state
+        snap = {"ns": (ns.U.x.array.copy(), ns.U_n.x.array.copy(), ns.u_nm1.x.array.copy(), ns.t, ns.step_count,
+                       len(ns.history)),
+                "dem": ({k: a.copy() for k, a in st.arrays().items()}, st.t, st.step,
+                        [it.checkpoint_arrays() if hasattr(it, "checkpoint_arrays") else None
+                         for it in self.system.interactions],
+                        self.system.ledger.checkpoint_arrays() if self.system.ledger is not None else None),
+                "coupling": (self.accel.copy(), self.alpha_ang.copy(), getattr(self, "_prev_exchange", None),
+                             self.fluid.last_dt)}
+        if hasattr(self.fluid, "pf"):
+            pf = self.fluid.pf
+            snap["pf"] = (pf.phi.x.array.copy(), pf.phi_n.x.array.copy(), pf.phi_nm1.x.array.copy(),
+                          pf.steps_done, pf.outflow_total)
+        return snap
+
+    def _restore(self, snap: dict) -> None:
+        ns, st = self.ns, self.system.state
+        U, U_n, u_nm1, ns.t, ns.step_count, nhist = snap["ns"]
+        ns.U.x.array[:], ns.U_n.x.array[:], ns.u_nm1.x.array[:] = U, U_n, u_nm1
+        del ns.history[nhist:]
+        arrays, st.t, st.step, inter, ledger = snap["dem"]
+        for k, a in st.arrays().items():
+            a[...] = arrays[k]
+        for it, saved in zip(self.system.interactions, inter):
+            if saved is not None:
+                it.restore({k: np.copy(v) for k, v in saved.items()})
+        if ledger is not None:
+            self.system.ledger.restore({k: np.copy(v) for k, v in ledger.items()})
+        self.accel[:], self.alpha_ang[:], prev, self.fluid.last_dt = snap["coupling"]
+        if prev is not None:
+            self._prev_exchange = prev
+        if "pf" in snap:
+            pf = self.fluid.pf
+            phi, phi_n, phi_nm1, pf.steps_done, pf.outflow_total = snap["pf"]
+            pf.phi.x.array[:], pf.phi_n.x.array[:], pf.phi_nm1.x.array[:] = phi, phi_n, phi_nm1
+            self.fluid.update_properties(phi)
+
+    def _advance(self, t: float, dt: float, timer: StageTimer) -> None:
         with timer("cut rebuild"):
             self.stats = self.rebuild_cut()
         self.fluid.advance(t, dt, timer)
@@ -307,7 +364,7 @@ class CoupledModel:
         ex = self.dem.last
         diag.update({"cut_cells": float(self.stats.cut_cells), "min_cut_fraction": self.stats.min_cut_fraction,
                      "dem_substeps": float(ex.n_sub if ex else 0), "dem_dt_margin": float(ex.dt_over_dt_cr if ex else 0),
-                     "exchange_error": self.exchange_error})
+                     "exchange_error": self.exchange_error, "retried_steps": float(self.retried)})
         total = self.force.sum(axis=0)
         diag.update({"force_x": total[0], "force_y": total[1], "force_z": total[2]})
         for b in range(min(self.nb, SERIES_BLOCKS)):
