@@ -113,10 +113,8 @@ class CutDomain:
         self.S1 = fem.FunctionSpace(mesh, ("Lagrange", 1))
         self.wall_velocity = fem.Function(self.V1, name="wall_velocity")
         self.level_set = fem.Function(self.S1, name="structure_level_set")
-        # geometry node → P1 dof (same local vertex order in every cell)
-        p1_cells = self.S1.dofmap.list.array.reshape(ncells, -1)
-        self.node_to_dof = np.empty(mesh.geometry.x.shape[0], np.int64)
-        self.node_to_dof[self.geom_cells.ravel()] = p1_cells.ravel()
+        self.level_dofs = self.node_map(self.S1)
+        self.wall_dofs = self.node_map(self.V1)
         self.cell_owner = np.full(ncells, -2, np.int64)
         self.fluid_measure = np.zeros(ncells)
         self.surface_measure = np.zeros(ncells)
@@ -124,6 +122,14 @@ class CutDomain:
         self._force_forms = None
 
     # ----------------------------------------------------------------- update
+    def node_map(self, V: fem.FunctionSpace) -> np.ndarray:
+        """Block dof of the P1 space ``V`` at each mesh vertex (:attr:`nodes` order): a P1
+        space numbers the vertices of every cell in the geometry's local order."""
+        cells = V.dofmap.list.array.reshape(self.geom_cells.shape[0], -1)
+        out = np.empty(self.mesh.geometry.x.shape[0], np.int64)
+        out[self.geom_cells.ravel()] = cells.ravel()
+        return out
+
     @property
     def nodes(self) -> np.ndarray:
         """Mesh vertex coordinates (n, 3) [m] where the level set is given (this rank, incl. ghosts)."""
@@ -139,10 +145,10 @@ class CutDomain:
         a = self.alpha
         self.volume_weight.x.array[self.q_dofs] = (1 - a) * cv + a
         self.surface_weight.x.array[self.q_dofs] = cs
-        self.level_set.x.array[self.node_to_dof] = level
+        self.level_set.x.array[self.level_dofs] = level
         bs = self.V1.dofmap.index_map_bs
         for d in range(self.gdim):
-            self.wall_velocity.x.array[bs * self.node_to_dof + d] = wall_velocity[:, d]
+            self.wall_velocity.x.array[bs * self.wall_dofs + d] = wall_velocity[:, d]
         # a cell belongs to the body owning its deepest vertex
         deepest = np.argmin(values, axis=1)
         self.cell_owner = owner[self.geom_cells[np.arange(len(values)), deepest]]

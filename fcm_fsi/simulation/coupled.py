@@ -90,9 +90,10 @@ class CoupledModel:
         self.levelset = StructureLevelSet(shapes_of_blocks(case.dem, st), self.nb, self.band)
         self.points = np.zeros((self.cut.nodes.shape[0], 3))
         self.points[:, : self.gdim] = self.cut.nodes[:, : self.gdim]
-        self.v_points = self.ns.V.tabulate_dof_coordinates()
-        self.v_fluid = np.ones(self.v_points.shape[0], bool)
-        self.v_rigid = np.zeros((self.v_points.shape[0], self.gdim))
+        self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
+        nv = self.ns.V.dofmap.index_map.size_local + self.ns.V.dofmap.index_map.num_ghosts
+        self.v_fluid = np.ones(nv, bool)
+        self.v_rigid = np.zeros((nv, self.gdim))
         if case.phase_field is not None:
             self.fluid.advection_filter = self.rigid_inside
             self.fluid.cell_density = self.fluid_part_density
@@ -162,11 +163,10 @@ class CoupledModel:
         """(a): level set, cut weights and wall velocity from the current block poses."""
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
-        ubar = self.dem.rigid_velocity(self.points, owner)
-        lv, ov = self.levelset.evaluate(self.v_points, st.pos, st.quat)
-        self.v_fluid = lv > 0
-        self.v_rigid = self.dem.rigid_velocity(self.v_points, ov)[:, : self.gdim]
-        return self.cut.update(level, owner, ubar[:, : self.gdim])
+        ubar = self.dem.rigid_velocity(self.points, owner)[:, : self.gdim]
+        self.v_fluid[self.v_of_node] = level > 0
+        self.v_rigid[self.v_of_node] = ubar
+        return self.cut.update(level, owner, ubar)
 
     def fluid_part_density(self, rho, rho_cell) -> None:
         """Cell-mean ρ of the PSPG test function over the cell's (weighted) fluid part, not
@@ -228,15 +228,11 @@ class CoupledModel:
 
     def _snapshot(self) -> dict:
         """Everything one step changes, as local copies (ghosts included)."""
-        ns, st = self.ns, self.system.state
+        ns = self.ns
         snap = {"ns": (ns.U.x.array.copy(), ns.U_n.x.array.copy(), ns.u_nm1.x.array.copy(), ns.t, ns.step_count,
                        len(ns.history)),
-                "dem": ({k: a.copy() for k, a in st.arrays().items()}, st.t, st.step,
-                        [it.checkpoint_arrays() if hasattr(it, "checkpoint_arrays") else None
-                         for it in self.system.interactions],
-                        self.system.ledger.checkpoint_arrays() if self.system.ledger is not None else None),
-                "coupling": (self.accel.copy(), self.alpha_ang.copy(), getattr(self, "_prev_exchange", None),
-                             self.fluid.last_dt)}
+                "dem": self.dem_arrays(),
+                "coupling": (getattr(self, "_prev_exchange", None), self.fluid.last_dt)}
         if hasattr(self.fluid, "pf"):
             pf = self.fluid.pf
             snap["pf"] = (pf.phi.x.array.copy(), pf.phi_n.x.array.copy(), pf.phi_nm1.x.array.copy(),
@@ -244,19 +240,12 @@ class CoupledModel:
         return snap
 
     def _restore(self, snap: dict) -> None:
-        ns, st = self.ns, self.system.state
+        ns = self.ns
         U, U_n, u_nm1, ns.t, ns.step_count, nhist = snap["ns"]
         ns.U.x.array[:], ns.U_n.x.array[:], ns.u_nm1.x.array[:] = U, U_n, u_nm1
         del ns.history[nhist:]
-        arrays, st.t, st.step, inter, ledger = snap["dem"]
-        for k, a in st.arrays().items():
-            a[...] = arrays[k]
-        for it, saved in zip(self.system.interactions, inter):
-            if saved is not None:
-                it.restore({k: np.copy(v) for k, v in saved.items()})
-        if ledger is not None:
-            self.system.ledger.restore({k: np.copy(v) for k, v in ledger.items()})
-        self.accel[:], self.alpha_ang[:], prev, self.fluid.last_dt = snap["coupling"]
+        self.load_dem_arrays(snap["dem"])
+        prev, self.fluid.last_dt = snap["coupling"]
         if prev is not None:
             self._prev_exchange = prev
         if "pf" in snap:
@@ -379,24 +368,24 @@ class CoupledModel:
     def health(self, diag: dict[str, float]) -> str | None:
         return self.fluid.health(diag)
 
-    def state(self):
-        fields, globals_ = self.fluid.state()
+    def dem_arrays(self) -> dict[str, np.ndarray]:
+        """Copies of everything the DEM side carries between steps (state, contact histories,
+        bonds, ledger, the last accelerations), by flat names: checkpoint globals and the
+        retry snapshot."""
         st = self.system.state
-        for name, a in st.arrays().items():
-            globals_[f"dem__{name}"] = a
-        globals_["dem__time"] = np.array([st.t, float(st.step)])
+        out = {f"dem__{name}": a.copy() for name, a in st.arrays().items()}
+        out["dem__time"] = np.array([st.t, float(st.step)])
         for k, it in enumerate(self.system.interactions):
             if hasattr(it, "checkpoint_arrays"):
                 for name, a in it.checkpoint_arrays().items():
-                    globals_[f"dem_int{k}__{name}"] = a
-        globals_["coupling__accel"] = np.concatenate([self.accel, self.alpha_ang])
+                    out[f"dem_int{k}__{name}"] = np.copy(a)
+        out["coupling__accel"] = np.concatenate([self.accel, self.alpha_ang])
         if self.system.ledger is not None:
-            globals_["dem__ledger"] = self.system.ledger.checkpoint_arrays()["ledger"]
-        return fields, globals_
+            out["dem__ledger"] = np.copy(self.system.ledger.checkpoint_arrays()["ledger"])
+        return out
 
-    def load_state(self, checkpoint) -> None:
-        self.fluid.load_state(checkpoint)
-        g = checkpoint.globals
+    def load_dem_arrays(self, g: dict[str, np.ndarray]) -> None:
+        """Inverse of :meth:`dem_arrays`."""
         st = self.system.state
         for name, a in st.arrays().items():
             a[...] = g[f"dem__{name}"]
@@ -405,7 +394,16 @@ class CoupledModel:
         for k, it in enumerate(self.system.interactions):
             if hasattr(it, "restore"):
                 prefix = f"dem_int{k}__"
-                it.restore({n[len(prefix):]: a for n, a in g.items() if n.startswith(prefix)})
+                it.restore({n[len(prefix):]: np.copy(a) for n, a in g.items() if n.startswith(prefix)})
         if self.system.ledger is not None and "dem__ledger" in g:
-            self.system.ledger.restore({"ledger": g["dem__ledger"]})
+            self.system.ledger.restore({"ledger": np.copy(g["dem__ledger"])})
+
+    def state(self):
+        fields, globals_ = self.fluid.state()
+        globals_.update(self.dem_arrays())
+        return fields, globals_
+
+    def load_state(self, checkpoint) -> None:
+        self.fluid.load_state(checkpoint)
+        self.load_dem_arrays(checkpoint.globals)
         self.stats = self.rebuild_cut()
