@@ -93,3 +93,50 @@ def test_displacement_controlled_block_force_and_ledger():
     assert L["spring"] == pytest.approx(9 * 0.5 * k * 0.0015 ** 2, rel=1e-9)
     assert L["dashpot_loss"] > 0.1 * L["work_control"]
     assert abs(L["balance_error"]) < 1e-9 * L["work_control"]
+
+
+def _elastic_pair_or_wall(pair: bool, gap: float, frac: float = 10.0):
+    """e = 1, μ = 0, no gravity: a sphere (v = 1 m/s) against a floor, or two spheres head on
+    (±0.5 m/s), starting ``gap`` apart, dt = Δt_cr/frac."""
+    import dataclasses
+
+    from fcm_fsi.config.dem import DEMConfig
+    from fcm_fsi.config.loader import build
+    from fcm_fsi.dem.model import build_system
+    r = 0.01
+    sph = {"shape": "sphere", "material": "m", "radius": r}
+    if pair:
+        blocks = [{**sph, "position": [0, 0, 0], "velocity": [0.5, 0, 0]},
+                  {**sph, "position": [2 * r + gap, 0, 0], "velocity": [-0.5, 0, 0]}]
+        walls = []
+    else:
+        blocks = [{**sph, "position": [0, 0, r + gap], "velocity": [0, 0, -1.0]}]
+        walls = [{"kind": "plane", "material": "m", "point": [0, 0, 0], "normal": [0, 0, 1]}]
+    cfg = build(DEMConfig, {"dt": 1.0, "dt_safety": 1.0, "gravity": [0, 0, 0],
+                            "materials": [{"name": "m", "stiffness": 1e5, "restitution": 1.0,
+                                           "friction_angle": 0.0, "density": 2500.0}],
+                            "blocks": blocks, "walls": walls}, "t", "dem")
+    s = build_system(dataclasses.replace(cfg, dt=1e-12))
+    s.dt = s.critical_time_step() / frac
+    return s
+
+
+@pytest.mark.parametrize("pair", [False, True])
+def test_elastic_impact_conserves_energy_across_onset_and_release(pair):
+    """The onset/release correction of the spring force (contact.py docstring): with e = 1
+    the impact returns the kinetic energy exactly (the leapfrog's own energy), whatever the
+    phase of contact onset and release within a step; without it the error is
+    O((ωΔt)²) ≈ 1e-2 at Δt_cr/10."""
+    errs = []
+    for gap in np.linspace(0.0, 1e-4, 7)[1:]:
+        s = _elastic_pair_or_wall(pair, gap)
+        E_in = 0.5 * float(np.sum(s.state.mass[:, None] * s.state.vel ** 2))
+        for _ in range(400):
+            s.step()
+        v = s.state.vel
+        E_out = 0.5 * float(np.sum(s.state.mass[:, None] * v ** 2))
+        assert (v[0, 0] < 0) if pair else (v[0, 2] > 0)      # rebounded and separated
+        assert s.ledger.last["spring"] == 0.0
+        errs.append(abs(E_out / E_in - 1))
+        assert abs(s.ledger.last["balance_error"]) < 1e-9 * E_in
+    assert max(errs) < 1e-8

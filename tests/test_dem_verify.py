@@ -1,9 +1,8 @@
 """The DEM verification cases at quick level: every metric meets its criterion.
 
-Known miss (reported, not hidden): bounce's ``energy_balance_error`` with e = 1 after 100
-bounces at Δt = Δt_cr/10 is ~6e-3, not ≤ 1e-4 — the leapfrog's error where a contact opens
-or closes is O((ω Δt)²) per impact (see docs/dem.md). It is a strict xfail: if it ever
-passes, the test says so.
+Known misses (reported, not hidden) go in KNOWN_MISS as strict xfails: if one ever passes,
+the test says so. None at present (bounce's ``energy_balance_error`` was one until the
+onset/release correction of the contact spring, see docs/dem.md §3).
 """
 import pytest
 from mpi4py import MPI
@@ -14,7 +13,7 @@ from fcm_fsi.verify.registry import load_all
 pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
 
-KNOWN_MISS = {("bounce", "energy_balance_error")}
+KNOWN_MISS: set = set()
 
 
 @pytest.mark.parametrize("name", ["bounce", "incline", "free_rotation", "chain_wave", "repose"])

@@ -19,10 +19,15 @@ class CouplingConfig:
         "pressure", doc="wall terms on Γ: penalty (the paper's; leaks under pressure: slip ≈ p/p̄); pressure: "
                         "penalty + the pressure part of the wall traction (no leak, stable for any cut); nitsche: "
                         "full symmetric Nitsche (needs p̄ ≳ μ/(f h) in cut cells of fluid fraction f)")
+    cut_extension: float = param(
+        1.0, doc="β of the cut-cell extension: the solid part of every cut cell carries a Brinkman term "
+                 "β ρ/Δt (u − ū) (its reaction is part of the block load) and β × the PSPG term, so nodes with "
+                 "tiny fluid support follow the wall and the pressure extends smoothly into the body; 0 = off "
+                 "(then the full floating_box level diverges at the contact line, docs/coupling.md)", ge=0, le=100)
     force_mode: Literal["hold", "linear"] = param(
         "hold", doc="fluid load over the DEM sub-steps: hold = constant; linear = ramp from the previous exchange")
     added_mass: float = param(0.0, doc="C_a of the added-mass stabilisation: each block's DEM inertia is raised by "
-                                       "m̃ = C_a ρ_fluid V_block and the load by m̃ a of the previous fluid step "
+                                       "m̃ = C_a ρ̄ V_block (ρ̄: mean fluid density on the block's wetted surface, each step) and the load by m̃ a of the previous fluid step "
                                        "(exact when converged; needed when the block's added mass exceeds its own)",
                               ge=0, le=20)
     depth: float | None = param(None, unit="m", doc="2D fluid only: out-of-plane extent of the blocks; the "

@@ -22,6 +22,29 @@ eq 20's e (e = 0.5 → 0.55; see ``restitution_clipped``). Without clipping eq 2
 exact for the linear model. Mixing of two materials: k = 2 k_1 k_2/(k_1 + k_2),
 k_t likewise, h = (h_1 + h_2)/2, μ = min(μ_1, μ_2).
 
+Onset/release correction of the normal spring (energy-consistent across δ = 0): the
+leapfrog's work of the spring force values F_n over the steps is Σ_n F_n (δ_{n+1} − δ_{n−1})/2,
+i.e. the trapezoid rule on each step, exact for the linear spring and in flight but not on
+the step [n−1, n] in which δ changes sign: there it misses the exact ½kδ² by
+k·D with D = ½ δ_{n−1} δ_n (onset, δ_{n−1} < 0 < δ_n) or −½ δ_{n−1} δ_n (release), an
+O((ωΔt)²) energy error of random sign per impact. It is cancelled by one corrected spring
+force k(δ + ε) at one step next to the crossing, ε = 2D/(δ_{m+1} − δ_{m−1}), the denominator
+(≈ 2 v_n Δt, well conditioned) predicted as 2δ_m − δ_{m−1} − Δt² F_N/m* + a_other, where
+a_other = δ_m − (that prediction made at step m−1) carries the other forces (gravity, other
+contacts) with a lag of one step:
+
+- onset: deferred to the second step of the contact (m = n + 1), so that a_other is known;
+  δ_{n−1} = δ_n − v_n Δt (v_n the normal relative velocity of the step), the force is
+  reduced (ε < 0, δ + ε clamped ≥ 0);
+- release: at the first step out of contact (m = n), with δ_{n−1} kept per contact: a
+  small *attractive* normal force kε (ε < 0, never clipped, applied once) that takes back
+  the part of the last spring impulse that fell after δ = 0. Only when the last normal
+  force was > 0 (a contact that ended clipped has no kink to correct).
+
+Both apply only while the overlap keeps moving the same way (growing, shrinking); the
+spring energy stays ½kδ² and the dashpot force is unchanged (F_N = k(δ + ε) + c v_n, dashpot
+part F_N − k(δ + ε)). Cost O(1) per contact, history slots 7–10.
+
 Ledger: stored energy ½kδ² + ½k_t|u_t|²; dashpot and slider losses are the work of those
 forces over each step by the trapezoid rule, Δt v_{n−1/2}·(F_{n−1} + F_n)/2 — the same
 quadrature that makes the leapfrog kinetic energy ½ m v_{n−1/2}·v_{n+1/2} exact — so what the
@@ -69,11 +92,38 @@ def restitution_clipped(h: float) -> float:
     return -dv
 
 
-HIST = 7   # per-contact history: tangential spring u_t (3), last normal dashpot force, last tangential dashpot force (3)
+HIST = 11  # per-contact history: tangential spring u_t (3), last normal dashpot force, last tangential dashpot
+#            force (3), then for the onset/release correction: last overlap δ_n (> 0 while in contact),
+#            deferred onset deficit (m²), self-predicted overlap for this step, last normal force F_N
 
 
 @nb.njit(cache=True, inline="always")
-def _law(delta, nx, ny, nz, ux, uy, uz, hist, k, kt, c, ct, mu, clip, dt):
+def _onset_release_eps(Dk, delta, dprev, un_grow, aoth, k, c, un, mstar, clip, dt, release):
+    """Overlap correction ε (m) of this step's spring force k(δ + ε) such that the trapezoidal
+    work of the step's force over the two adjacent steps, ½ kε (δ_{n+1} − δ_{n−1}), equals
+    k·Dk (the deficit of the kink at δ = 0). δ_{n+1} is predicted as
+    2δ_n − δ_{n−1} − Δt² F_N/m* + a_other, a_other the last step's prediction miss.
+    Applied only while the overlap keeps moving the same way (growing at an onset,
+    shrinking at a release); 0 otherwise."""
+    w = dt * dt / mstar
+    eps = 0.0
+    for _ in range(3):
+        if release:
+            FN = k * eps
+        else:
+            FN = k * (delta + eps) + c * un
+            if clip and FN < 0.0:
+                FN = 0.0
+        den = 2.0 * delta - 2.0 * dprev - w * FN + aoth
+        if (not release and den > un_grow) or (release and den < un_grow):
+            eps = 2.0 * Dk / den
+        else:
+            return 0.0
+    return eps
+
+
+@nb.njit(cache=True, inline="always")
+def _law(delta, nx, ny, nz, ux, uy, uz, hist, k, kt, c, ct, mu, clip, dt, mstar):
     """Eqs 18–19 for one contact. (ux, uy, uz) is the relative velocity of the leapfrog half
     step n−1/2, i.e. the relative displacement of the step n−1 → n over Δt; the dashpots use
     it too (the tutorial's c(u_n − u_{n−1})/Δt, whose stability limit is Δt_cr). Returns (fx, fy, fz, e_spring, d_dash,
@@ -86,10 +136,29 @@ def _law(delta, nx, ny, nz, ux, uy, uz, hist, k, kt, c, ct, mu, clip, dt):
     sy = uy - un * ny
     sz = uz - un * nz
     vn, tx, ty, tz = un, sx, sy, sz
-    FN = k * delta + c * vn
+    # onset/release correction of the spring force (module docstring): k δ → k (δ + ε)
+    dprev = hist[7]
+    if dprev > 0.0:                      # in contact at the previous step
+        Dk = hist[8]                     # deferred onset deficit
+        aoth = delta - hist[9]           # last step's prediction miss (gravity, other contacts)
+    else:                                # first step of the contact
+        Dk = 0.0
+        aoth = 0.0
+        dprev = delta - un * dt          # overlap at the previous step (< 0 at a true onset)
+    eps = 0.0
+    if Dk != 0.0:
+        eps = _onset_release_eps(Dk, delta, dprev, delta - dprev, aoth, k, c, vn, mstar, clip, dt, False)
+        if delta + eps < 0.0:
+            eps = -delta
+    deff = delta + eps
+    FN = k * deff + c * vn
     if clip and FN < 0.0:
         FN = 0.0
-    fdn = FN - k * delta
+    fdn = FN - k * deff
+    hist[8] = 0.5 * dprev * delta if (hist[7] <= 0.0 and dprev < 0.0) else 0.0
+    hist[9] = 2.0 * delta - dprev - dt * dt * FN / mstar     # δ_{n+1} from this contact alone
+    hist[7] = delta
+    hist[10] = FN
     d_dash = 0.5 * (fdn + hist[3]) * un * dt
     hist[3] = fdn
     # rotate the history onto the current tangent plane, keeping its magnitude
@@ -154,16 +223,35 @@ def _pointvel(vel, omega, b, rx, ry, rz):
 
 
 @nb.njit(cache=True, inline="always")
-def _release(nx, ny, nz, vx, vy, vz, hist, dt):
-    """Contact lost this step: the last half of the trapezoid of the dashpot work, then reset."""
+def _add_load(force, torque, b, fx, fy, fz, rx, ry, rz):
+    """Add the force (fx, fy, fz) acting at arm r = (rx, ry, rz) from block b's centre."""
+    force[b, 0] += fx
+    force[b, 1] += fy
+    force[b, 2] += fz
+    torque[b, 0] += ry * fz - rz * fy
+    torque[b, 1] += rz * fx - rx * fz
+    torque[b, 2] += rx * fy - ry * fx
+
+
+@nb.njit(cache=True, inline="always")
+def _release(delta, nx, ny, nz, vx, vy, vz, hist, k, mstar, dt):
+    """Contact lost this step: the last half of the trapezoid of the dashpot work, the
+    release correction of the spring (normal force k ε, ε ≤ 0, unclipped: it takes back the
+    part of the last step's spring impulse that fell after δ = 0; only when the last normal
+    force was > 0), then reset. Returns (dashpot loss, F_N)."""
     d = 0.0
+    vn = vx * nx + vy * ny + vz * nz
     if hist[3] != 0.0 or hist[4] != 0.0 or hist[5] != 0.0 or hist[6] != 0.0:
-        vn = vx * nx + vy * ny + vz * nz
         d = 0.5 * hist[3] * vn * dt - 0.5 * (hist[4] * (vx - vn * nx) + hist[5] * (vy - vn * ny)
                                              + hist[6] * (vz - vn * nz)) * dt
+    FN = 0.0
+    p = hist[7]
+    if p > 0.0 and hist[10] > 0.0:
+        Dk = hist[8] - 0.5 * p * delta
+        FN = k * _onset_release_eps(Dk, delta, p, delta - p, delta - hist[9], k, 0.0, vn, mstar, False, dt, True)
     for q in range(hist.shape[0]):
         hist[q] = 0.0
-    return d
+    return d, FN
 
 
 @nb.njit(cache=True, inline="always")
@@ -193,12 +281,12 @@ def pair_forces(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, 
         delta = sph_radius[i] + sph_radius[j] - dist
         if dist == 0.0:
             continue
-        if delta <= 0.0 and hist[p, 3] == 0.0 and hist[p, 4] == 0.0 and hist[p, 5] == 0.0 and hist[p, 6] == 0.0:
+        if delta <= 0.0 and hist[p, 3] == 0.0 and hist[p, 4] == 0.0 and hist[p, 5] == 0.0 and hist[p, 6] == 0.0 \
+                and hist[p, 7] <= 0.0:
             # out of contact and nothing to release (the common case in a Verlet list)
-            if hist[p, 0] != 0.0 or hist[p, 1] != 0.0 or hist[p, 2] != 0.0:
-                hist[p, 0] = 0.0
-                hist[p, 1] = 0.0
-                hist[p, 2] = 0.0
+            for q in range(hist.shape[1]):
+                if hist[p, q] != 0.0:
+                    hist[p, q] = 0.0
             pair_f[p, 0] = 0.0
             pair_f[p, 1] = 0.0
             pair_f[p, 2] = 0.0
@@ -221,12 +309,6 @@ def pair_forces(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, 
         ai = _pointvel(vel, omega, bi, rix, riy, riz)
         aj = _pointvel(vel, omega, bj, rjx, rjy, rjz)
         ux, uy, uz = ai[0] - aj[0], ai[1] - aj[1], ai[2] - aj[2]
-        if delta <= 0.0:
-            d_d += _release(nx, ny, nz, ux, uy, uz, hist[p], dt)
-            pair_f[p, 0] = 0.0
-            pair_f[p, 1] = 0.0
-            pair_f[p, 2] = 0.0
-            continue
         if fixed[bi]:
             mstar = mass[bj]
         elif fixed[bj]:
@@ -234,9 +316,19 @@ def pair_forces(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, 
         else:
             mstar = mass[bi] * mass[bj] / (mass[bi] + mass[bj])
         k, kt, h, mu = _mix(mat_k, mat_kt, mat_h, mat_mu, sph_material[i], sph_material[j])
+        if delta <= 0.0:
+            dd, FN = _release(delta, nx, ny, nz, ux, uy, uz, hist[p], k, mstar, dt)
+            d_d += dd
+            pair_f[p, 0] = -FN * nx
+            pair_f[p, 1] = -FN * ny
+            pair_f[p, 2] = -FN * nz
+            pair_x[p, 0] = cx
+            pair_x[p, 1] = cy
+            pair_x[p, 2] = cz
+            continue
         c = 2.0 * h * math.sqrt(mstar * k)
         ct = 2.0 * h * math.sqrt(mstar * kt)
-        fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[p], k, kt, c, ct, mu, clip, dt)
+        fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[p], k, kt, c, ct, mu, clip, dt, mstar)
         pair_f[p, 0] = fx
         pair_f[p, 1] = fy
         pair_f[p, 2] = fz
@@ -343,6 +435,7 @@ def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omeg
                     delta = -1.0
                     nx, ny, nz = 0.0, 0.0, 1.0
                     wm = 0
+                    hist[s, w, 7] = 0.0        # no release correction for a removed wall
                 elif w < npl:
                     gap = planes[w, 0] * px + planes[w, 1] * py + planes[w, 2] * pz - planes[w, 3]
                     delta = r - gap
@@ -368,11 +461,10 @@ def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omeg
                         nx = ny = nz = 0.0
                     wm = mesh_mat[m]
                 if delta <= 0.0 and hist[s, w, 3] == 0.0 and hist[s, w, 4] == 0.0 and \
-                        hist[s, w, 5] == 0.0 and hist[s, w, 6] == 0.0:
-                    if hist[s, w, 0] != 0.0 or hist[s, w, 1] != 0.0 or hist[s, w, 2] != 0.0:
-                        hist[s, w, 0] = 0.0
-                        hist[s, w, 1] = 0.0
-                        hist[s, w, 2] = 0.0
+                        hist[s, w, 5] == 0.0 and hist[s, w, 6] == 0.0 and hist[s, w, 7] <= 0.0:
+                    for q in range(hist.shape[2]):
+                        if hist[s, w, q] != 0.0:
+                            hist[s, w, q] = 0.0
                     continue
                 if nx == 0.0 and ny == 0.0 and nz == 0.0:
                     for q in range(hist.shape[2]):
@@ -386,20 +478,18 @@ def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omeg
                 ry = cy - pos[b, 1]
                 rz = cz - pos[b, 2]
                 ux, uy, uz = _pointvel(vel, omega, b, rx, ry, rz)
-                if delta <= 0.0:
-                    d_d += _release(nx, ny, nz, ux, uy, uz, hist[s, w], dt)
-                    continue
                 k, kt, h, mu = _mix(mat_k, mat_kt, mat_h, mat_mu, sph_material[s], wm)
+                if delta <= 0.0:
+                    dd, FN = _release(delta, nx, ny, nz, ux, uy, uz, hist[s, w], k, mass[b], dt)
+                    d_d += dd
+                    if FN != 0.0:
+                        _add_load(force, torque, b, -FN * nx, -FN * ny, -FN * nz, rx, ry, rz)
+                    continue
                 c = 2.0 * h * math.sqrt(mass[b] * k)
                 ct = 2.0 * h * math.sqrt(mass[b] * kt)
                 fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[s, w],
-                                              k, kt, c, ct, mu, clip, dt)
-                force[b, 0] += fx
-                force[b, 1] += fy
-                force[b, 2] += fz
-                torque[b, 0] += ry * fz - rz * fy
-                torque[b, 1] += rz * fx - rx * fz
-                torque[b, 2] += rx * fy - ry * fx
+                                              k, kt, c, ct, mu, clip, dt, mass[b])
+                _add_load(force, torque, b, fx, fy, fz, rx, ry, rz)
                 e_s += es
                 d_d += dd
                 d_f += df
@@ -407,15 +497,52 @@ def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omeg
 
 
 # ---------------------------------------------------------------- NumPy reference
-def _law_ref(delta, n, un, ut, hist, k, kt, c, ct, mu, clip, dt):
+def _eps_ref(Dk, delta, dprev, grow, aoth, k, c, un, mstar, clip, dt, release):
+    """NumPy reference of :func:`_onset_release_eps` (vectorised)."""
+    w = dt * dt / mstar
+    eps = np.zeros_like(delta)
+    ok = np.ones(delta.shape, bool)
+    for _ in range(3):
+        if release:
+            FN = k * eps
+        else:
+            FN = k * (delta + eps) + c * un
+            if clip:
+                FN = np.maximum(FN, 0.0)
+        den = 2 * delta - 2 * dprev - w * FN + aoth
+        ok &= (den < grow) if release else (den > grow)
+        eps = np.where(ok, 2 * Dk / np.where(ok, den, 1.0), 0.0)
+    return eps
+
+
+def _release_force_ref(delta, un, hist, k, mstar, dt):
+    """NumPy reference of the release correction in :func:`_release`: F_N (≤ 0) per contact."""
+    p = hist[:, 7]
+    on = (p > 0) & (hist[:, 10] > 0)
+    eps = _eps_ref(hist[:, 8] - 0.5 * p * delta, delta, p, delta - p, delta - hist[:, 9], k, 0.0, un, mstar,
+                   False, dt, True)
+    return np.where(on, k * eps, 0.0)
+
+
+def _law_ref(delta, n, un, ut, hist, k, kt, c, ct, mu, clip, dt, mstar):
     """NumPy reference of the contact law (eqs 18–20 + slider) for one batch of contacts:
     relative contact velocity split into un, ut; ``hist`` rows = (tangential spring
-    elongation (3), previous dashpot normal force, previous tangential dashpot force (3)).
+    elongation (3), previous dashpot normal force, previous tangential dashpot force (3), last
+    overlap, deferred onset deficit, self-predicted overlap, last F_N).
     Returns (force on the first body, spring energy, dashpot work, friction work, new history)."""
-    FN = k * delta + c * un
+    inprev = hist[:, 7] > 0
+    Dk = np.where(inprev, hist[:, 8], 0.0)
+    aoth = np.where(inprev, delta - hist[:, 9], 0.0)
+    dprev = np.where(inprev, hist[:, 7], delta - un * dt)
+    eps = _eps_ref(Dk, delta, dprev, delta - dprev, aoth, k, c, un, mstar, clip, dt, False)
+    eps = np.where(delta + eps < 0, -delta, eps)
+    deff = delta + eps
+    FN = k * deff + c * un
     if clip:
         FN = np.maximum(FN, 0.0)
-    fdn = FN - k * delta
+    fdn = FN - k * deff
+    corr = np.stack([delta, np.where(~inprev & (dprev < 0), 0.5 * dprev * delta, 0.0),
+                     2 * delta - dprev - dt * dt * FN / mstar, FN], axis=1)
     d_dash = 0.5 * (fdn + hist[:, 3]) * un * dt
     hh = hist[:, :3]
     h2 = np.sum(hh * hh, axis=1)
@@ -437,7 +564,7 @@ def _law_ref(delta, n, un, ut, hist, k, kt, c, ct, mu, clip, dt):
     hh = np.where(slip[:, None], h_s, hh)
     f = -FN[:, None] * n + ft
     e_s = 0.5 * k * delta ** 2 + 0.5 * kt * np.sum(hh * hh, axis=1)
-    new_hist = np.concatenate([hh, fdn[:, None], g], axis=1)
+    new_hist = np.concatenate([hh, fdn[:, None], g, corr], axis=1)
     return f, e_s, d_dash, d_fric, new_hist
 
 
@@ -464,11 +591,12 @@ def pair_forces_ref(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, p
     c, ct = 2 * h * np.sqrt(mstar * k), 2 * h * np.sqrt(mstar * kt)
     un = np.sum(u * n, axis=1)
     ut = u - un[:, None] * n
-    f, e_s, d_dash, d_fric, new_hist = _law_ref(delta, n, un, ut, hist, k, kt, c, ct, mu, clip, dt)
-    # released contacts: last half of the dashpot trapezoid, history reset
+    f, e_s, d_dash, d_fric, new_hist = _law_ref(delta, n, un, ut, hist, k, kt, c, ct, mu, clip, dt, mstar)
+    # released contacts: last half of the dashpot trapezoid, release correction, history reset
     rel = 0.5 * hist[:, 3] * un * dt - 0.5 * np.sum(hist[:, 4:7] * ut, axis=1) * dt
     d_dash = np.where(on, d_dash, rel)
-    f[~on] = 0
+    f_rel = -_release_force_ref(delta, un, hist, k, mstar, dt)[:, None] * n
+    f[~on] = f_rel[~on]
     new_hist[~on] = 0
     force = np.zeros_like(pos)
     torque = np.zeros_like(pos)
@@ -613,12 +741,13 @@ def wall_forces_ref(blk_sph_start, sph_pos, sph_radius, sph_material, sph_block,
         un = np.sum(u * n, axis=1)
         ut = u - un[:, None] * n
         H = hist[:, w]
-        f, e_s, d_dash, d_fric, new = _law_ref(delta, n, un, ut, H, k, kt, c, ct, mu, clip, dt)
+        f, e_s, d_dash, d_fric, new = _law_ref(delta, n, un, ut, H, k, kt, c, ct, mu, clip, dt, mass[b])
         on = (delta > 0) & live
         rel = 0.5 * H[:, 3] * un * dt - 0.5 * np.sum(H[:, 4:7] * ut, axis=1) * dt
+        f_rel = -_release_force_ref(delta, un, H, k, mass[b], dt)[:, None] * n   # before H (a view) is updated
         new[~on] = 0.0
         hist[:, w] = np.where(live[:, None], new, H)
-        f[~on] = 0.0
+        f = np.where(on[:, None], f, np.where(live[:, None], f_rel, 0.0))
         np.add.at(force, b, f)
         np.add.at(torque, b, np.cross(xc - pos[b], f))
         tot += [e_s[on].sum(), np.where(on, d_dash, np.where(live, rel, 0.0)).sum(), d_fric[on].sum()]

@@ -25,6 +25,15 @@ would let the wall velocity oscillate). Penalty scaling
 i.e. γ times the larger of the viscous and inertial stiffness of a cell of size h, so the
 wall slip velocity is ≈ 1/γ of the velocity scale at any Reynolds number.
 
+Cut-cell extension (β = ``extension`` > 0; the coupled runs' default β = 1): the solid part
+of every *cut* cell (weight 1 − c_v at its points) also carries a Brinkman term
+∫ β ρ/Δt (u − ū)·w and β times the PSPG term ∫ τ ∇q/ρ̄ · R_M. A node whose support is
+almost all solid is then held at ū by a mass-like term instead of by the α-scaled equations,
+and the pressure is extended into the body by a full-strength pressure Laplacian instead of
+an α-weak one, so the wall pressure trace of a sliver cell stays bounded. The perturbation
+is confined to the solid side of Γ, where u = ū holds anyway up to the wall slip. The
+Brinkman term's reaction is added to the body load below, so the exchange stays exact.
+
 Force on body b: the traction the penalty exerts, F_b = ∫_{Γ_b} p̄ (u − ū) dΓ, and the
 torque about its centre T_b = ∫_{Γ_b} (x − x_b) × p̄ (u − ū) dΓ. Since the penalty term
 is the only coupling between wall and fluid in the discrete equations, this equals the
@@ -41,7 +50,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
-from ..fluid.navier_stokes import cell_size
+from ..fluid.navier_stokes import cell_size, momentum_residual
 from .moments import fitted_weights
 
 #: wall conditions on Γ (module docstring): the paper's penalty; penalty + the pressure part of
@@ -80,10 +89,12 @@ class CutDomain:
     """Quadrature weights, wall velocity and body forces of the cut fluid domain.
 
     mesh: dolfinx mesh (P1 simplices); alpha: fictitious-domain factor of the solid part;
-    penalty: γ of the penalty scaling (module docstring).
+    penalty: γ of the penalty scaling (module docstring); extension: β of the cut-cell
+    extension (module docstring), 0 = off.
     """
 
-    def __init__(self, mesh, alpha: float = 1e-3, penalty: float = 100.0, wall: str = "pressure") -> None:
+    def __init__(self, mesh, alpha: float = 1e-3, penalty: float = 100.0, wall: str = "pressure",
+                 extension: float = 0.0) -> None:
         if wall not in WALL_TERMS:
             raise ValueError(f"wall = {wall!r}; allowed: {', '.join(WALL_TERMS)}")
         self.mesh, self.comm, self.wall = mesh, mesh.comm, wall
@@ -98,6 +109,8 @@ class CutDomain:
         self.Vq = fem.FunctionSpace(mesh, qe)
         self.volume_weight = fem.Function(self.Vq, name="fluid_weight")
         self.surface_weight = fem.Function(self.Vq, name="surface_weight")
+        self.extension_weight = fem.Function(self.Vq, name="extension_weight")
+        self.extension = float(extension)
         self.dx_q = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": self.degree})
         self.dx = WeightedMeasure(self.dx_q, self.volume_weight)
         self.dGamma = WeightedMeasure(self.dx_q, self.surface_weight)
@@ -145,6 +158,8 @@ class CutDomain:
         a = self.alpha
         self.volume_weight.x.array[self.q_dofs] = (1 - a) * cv + a
         self.surface_weight.x.array[self.q_dofs] = cs
+        cut = (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
+        self.extension_weight.x.array[self.q_dofs] = np.where(cut[:, None], 1.0 - cv, 0.0)
         self.level_set.x.array[self.level_dofs] = level
         bs = self.V1.dofmap.index_map_bs
         for d in range(self.gdim):
@@ -197,6 +212,13 @@ class CutDomain:
             self._pbar = self.penalty_coefficient(parts, self.h)
             self._parts = parts
             F = -ufl.inner(self.wall_traction(parts), parts.w) * self.dGamma
+            if self.extension > 0:
+                beta = self.extension
+                F = F + beta * parts.rho / parts.dt * ufl.inner(parts.u - self.wall_velocity, parts.w) \
+                    * self.extension_weight * self.dx_q
+                rp = parts.rho_pspg if parts.rho_pspg is not None else parts.rho
+                F = F + beta * parts.tau_supg * ufl.inner(ufl.grad(parts.q) / rp, momentum_residual(parts)) \
+                    * self.extension_weight * self.dx_q
             if self.wall != "penalty":
                 adj = parts.q * self.wall_normal()
                 if self.wall == "nitsche":
@@ -212,13 +234,17 @@ class CutDomain:
         x = ufl.SpatialCoordinate(self.mesh)
         V0 = fem.VectorFunctionSpace(self.mesh, ("DG", 0))
         v0 = ufl.TestFunction(V0)
-        force = fem.form(ufl.inner(t, v0) * self.dGamma)
+        # the extension's Brinkman term acts on the solid part of cut cells: its reaction is load too
+        tv = self.extension * self._parts.rho / self._parts.dt * (self._parts.u - self.wall_velocity)
+        dV = WeightedMeasure(self.dx_q, self.extension_weight)
+        force = fem.form(ufl.inner(t, v0) * self.dGamma + ufl.inner(tv, v0) * dV)
         if self.gdim == 2:
             S0 = fem.FunctionSpace(self.mesh, ("DG", 0))
-            moment = fem.form((x[0] * t[1] - x[1] * t[0]) * ufl.TestFunction(S0) * self.dGamma)
+            moment = fem.form((x[0] * t[1] - x[1] * t[0]) * ufl.TestFunction(S0) * self.dGamma
+                              + (x[0] * tv[1] - x[1] * tv[0]) * ufl.TestFunction(S0) * dV)
             dofs_m = S0.dofmap.list.array
         else:
-            moment = fem.form(ufl.inner(ufl.cross(x, t), v0) * self.dGamma)
+            moment = fem.form(ufl.inner(ufl.cross(x, t), v0) * self.dGamma + ufl.inner(ufl.cross(x, tv), v0) * dV)
             dofs_m = V0.dofmap.list.array
         self._force_forms = (force, moment, V0.dofmap.list.array, dofs_m)
 
@@ -250,6 +276,29 @@ class CutDomain:
         else:
             torque[:] = moment - np.cross(c[:, :3], force)
         return force, torque
+
+    def wetted_mean(self, nbodies: int, value) -> np.ndarray:
+        """Mean of a scalar field over each body's cut surface, (nbodies,); NaN for a body
+        with no cut surface. Collective; same on all ranks."""
+        # forms compiled once per field (the reference kept here also keeps id() unique)
+        if getattr(self, "_wetted_value", None) is not value:
+            S0 = fem.FunctionSpace(self.mesh, ("DG", 0))
+            v0 = ufl.TestFunction(S0)
+            self._wetted_forms = (fem.form(value * v0 * self.dGamma), fem.form(v0 * self.dGamma),
+                                  S0.dofmap.list.array)
+            self._wetted_value = value
+        f_val, f_area, dofs = self._wetted_forms
+        own = self.n_owned
+        owner = self.cell_owner[:own]
+        mask = owner >= 0
+        sums = np.zeros((2, nbodies))
+        for k, form in enumerate((f_val, f_area)):
+            vec = fem.petsc.assemble_vector(form)
+            np.add.at(sums[k], owner[mask], vec.array[dofs[:own]][mask])
+            vec.destroy()
+        sums = self.comm.allreduce(sums, op=MPI.SUM)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(sums[1] > 0, sums[0] / np.where(sums[1] > 0, sums[1], 1.0), np.nan)
 
     def fluid_volume(self) -> float:
         """∫ 1 over the fluid part by the fitted weights (equals the exact cut measure)."""

@@ -342,7 +342,7 @@ def cylinder_3d1z_solution(comm, h_cyl: float, h_far: float, petsc: dict):
 @register("cylinder_3d1z", "Schäfer–Turek 3D-1Z (Re 20, steady, square channel): drag and pressure drop", issue=3)
 def cylinder_3d1z(level, out_dir: Path, comm) -> list[Metric]:
     from ...fluid.solvers import ITERATIVE_3D
-    levels = [(0.02, 0.06)] if level == "quick" else [(0.02, 0.06), (0.015, 0.04), (0.01, 0.03)]
+    levels = [(0.02, 0.06)] if level == "quick" else [(0.02, 0.06), (0.015, 0.04), (0.01, 0.03), (0.0075, 0.0225)]
     rows = []
     for h_cyl, h_far in levels:
         t0 = time.perf_counter()
