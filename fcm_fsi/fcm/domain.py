@@ -64,6 +64,11 @@ CUT_QUADRATURE_DEGREE = {2: 5, 3: 4}
 
 
 
+def cut_cells(values: np.ndarray) -> np.ndarray:
+    """Cells (rows of vertex level-set values) that Γ cuts: some vertex in the body, some not."""
+    return (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
+
+
 class WeightedMeasure:
     """``f * WeightedMeasure(dx, c)`` is ``f * c * dx``: a measure with a weight field."""
 
@@ -114,6 +119,7 @@ class CutDomain:
         self.dx_q = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": self.degree})
         self.dx = WeightedMeasure(self.dx_q, self.volume_weight)
         self.dGamma = WeightedMeasure(self.dx_q, self.surface_weight)
+        self.dExt = WeightedMeasure(self.dx_q, self.extension_weight)   # solid part of cut cells
 
         imap = mesh.topology.index_map(tdim)
         self.n_owned = imap.size_local
@@ -133,6 +139,12 @@ class CutDomain:
         self.surface_measure = np.zeros(ncells)
         self.h = cell_size(mesh)
         self._force_forms = None
+
+    @property
+    def fluid_fraction(self):
+        """c_v at the quadrature points (1 fluid, 0 solid) as a UFL expression: the volume
+        weight without the fictitious α."""
+        return (self.volume_weight - self.alpha) / (1 - self.alpha)
 
     # ----------------------------------------------------------------- update
     def node_map(self, V: fem.FunctionSpace) -> np.ndarray:
@@ -158,8 +170,7 @@ class CutDomain:
         a = self.alpha
         self.volume_weight.x.array[self.q_dofs] = (1 - a) * cv + a
         self.surface_weight.x.array[self.q_dofs] = cs
-        cut = (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
-        self.extension_weight.x.array[self.q_dofs] = np.where(cut[:, None], 1.0 - cv, 0.0)
+        self.extension_weight.x.array[self.q_dofs] = np.where(cut_cells(values)[:, None], 1.0 - cv, 0.0)
         self.level_set.x.array[self.level_dofs] = level
         bs = self.V1.dofmap.index_map_bs
         for d in range(self.gdim):
@@ -172,7 +183,7 @@ class CutDomain:
     def statistics(self, values: np.ndarray) -> CutStatistics:
         own = slice(0, self.n_owned)
         v = values[own]
-        cut = (v.min(axis=1) < 0) & (v.max(axis=1) >= 0)
+        cut = cut_cells(v)
         solid = v.max(axis=1) < 0
         full = np.abs(np.linalg.det(self.cell_coords[own, 1:] - self.cell_coords[own, :1])) / (
             2.0 if self.gdim == 2 else 6.0)
@@ -203,6 +214,11 @@ class CutDomain:
             t = t + 2 * parts.mu * ufl.dot(ufl.sym(ufl.grad(parts.u_theta)), self.wall_normal())
         return t
 
+    def extension_traction(self, parts):
+        """Force per unit volume the extension's Brinkman term exerts on the body, β ρ/Δt (u − ū),
+        on the solid part of cut cells (measure :attr:`dExt`)."""
+        return self.extension * parts.rho / parts.dt * (parts.u - self.wall_velocity)
+
     def penalty_term(self):
         """The NS extra term of the wall (pass as ``extra_terms=[...]``): −∫_Γ t_w·w dΓ with
         t_w of :meth:`wall_traction`, plus the adjoint terms that keep the pressure coupling
@@ -213,12 +229,10 @@ class CutDomain:
             self._parts = parts
             F = -ufl.inner(self.wall_traction(parts), parts.w) * self.dGamma
             if self.extension > 0:
-                beta = self.extension
-                F = F + beta * parts.rho / parts.dt * ufl.inner(parts.u - self.wall_velocity, parts.w) \
-                    * self.extension_weight * self.dx_q
                 rp = parts.rho_pspg if parts.rho_pspg is not None else parts.rho
-                F = F + beta * parts.tau_supg * ufl.inner(ufl.grad(parts.q) / rp, momentum_residual(parts)) \
-                    * self.extension_weight * self.dx_q
+                F = F + ufl.inner(self.extension_traction(parts), parts.w) * self.dExt
+                F = F + self.extension * parts.tau_supg * ufl.inner(ufl.grad(parts.q) / rp,
+                                                                    momentum_residual(parts)) * self.dExt
             if self.wall != "penalty":
                 adj = parts.q * self.wall_normal()
                 if self.wall == "nitsche":
@@ -235,16 +249,16 @@ class CutDomain:
         V0 = fem.VectorFunctionSpace(self.mesh, ("DG", 0))
         v0 = ufl.TestFunction(V0)
         # the extension's Brinkman term acts on the solid part of cut cells: its reaction is load too
-        tv = self.extension * self._parts.rho / self._parts.dt * (self._parts.u - self.wall_velocity)
-        dV = WeightedMeasure(self.dx_q, self.extension_weight)
-        force = fem.form(ufl.inner(t, v0) * self.dGamma + ufl.inner(tv, v0) * dV)
+        loads = [(t, self.dGamma)]
+        if self.extension > 0:
+            loads.append((self.extension_traction(self._parts), self.dExt))
+        force = fem.form(sum(ufl.inner(f, v0) * m for f, m in loads))
         if self.gdim == 2:
             S0 = fem.FunctionSpace(self.mesh, ("DG", 0))
-            moment = fem.form((x[0] * t[1] - x[1] * t[0]) * ufl.TestFunction(S0) * self.dGamma
-                              + (x[0] * tv[1] - x[1] * tv[0]) * ufl.TestFunction(S0) * dV)
+            moment = fem.form(sum((x[0] * f[1] - x[1] * f[0]) * ufl.TestFunction(S0) * m for f, m in loads))
             dofs_m = S0.dofmap.list.array
         else:
-            moment = fem.form(ufl.inner(ufl.cross(x, t), v0) * self.dGamma + ufl.inner(ufl.cross(x, tv), v0) * dV)
+            moment = fem.form(sum(ufl.inner(ufl.cross(x, f), v0) * m for f, m in loads))
             dofs_m = V0.dofmap.list.array
         self._force_forms = (force, moment, V0.dofmap.list.array, dofs_m)
 
@@ -302,8 +316,7 @@ class CutDomain:
 
     def fluid_volume(self) -> float:
         """∫ 1 over the fluid part by the fitted weights (equals the exact cut measure)."""
-        vol = fem.assemble_scalar(fem.form(
-            ((self.volume_weight - self.alpha) / (1 - self.alpha)) * self.dx_q))
+        vol = fem.assemble_scalar(fem.form(self.fluid_fraction * self.dx_q))
         return float(self.comm.allreduce(vol, op=MPI.SUM))
 
     def surface_area(self) -> float:

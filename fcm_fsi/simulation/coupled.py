@@ -83,7 +83,8 @@ class CoupledModel:
         self.dem = DEMSubcycler(self.system)
         st = self.system.state
         self.nb = st.nb
-        self.added_mass = self._add_mass(case)
+        self._remember_own_inertia(case)
+        self.added_mass = np.zeros(self.nb)         # m̃ per block, set every step (_update_added_mass)
         self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
         self.alpha_ang = np.zeros((self.nb, 3))
         self.depth = 1.0 if self.gdim == 3 else float(cp.depth)
@@ -118,8 +119,7 @@ class CoupledModel:
         if case.phase_field is not None:
             # liquid volume [m^d] in the fluid part and inside the blocks (fitted weights): the
             # phase field is solved on the whole mesh, so water can diffuse into a block
-            a = self.cut.alpha
-            cf = (self.cut.volume_weight - a) / (1 - a)
+            cf = self.cut.fluid_fraction
             phi = self.fluid.pf.phi
             self._water_forms = (fem.form(phi * cf * self.cut.dx_q), fem.form(phi * (1 - cf) * self.cut.dx_q))
             self.series_units.update({"water_fluid_part": "m^d", "water_in_blocks": "m^d",
@@ -142,14 +142,15 @@ class CoupledModel:
                  "smallest cut fraction %.2e", self.nb, st.ns, self.system.dt, self.band, self.stats.cut_cells,
                  self.stats.min_cut_fraction)
 
-    def _add_mass(self, case: Case) -> np.ndarray:
-        """Remember each block's own mass, inertia and volume V_b = m_b/ρ_material for the
-        added-mass stabilisation (:meth:`_update_added_mass` sets m̃ every step)."""
+    def _remember_own_inertia(self, case: Case) -> None:
+        """Each block's own mass, inertia and volume V_b = m_b/ρ_material, and the fluid
+        density field whose wetted mean gives ρ̄_b, for :meth:`_update_added_mass`."""
         st = self.system.state
         self.mass0, self.inertia0 = st.mass.copy(), st.inertia.copy()
         dens = np.array([m.density for m in case.dem.materials])
         self.volume_b = st.mass / dens[st.sph_material[st.blk_sph_start[:-1]]]
-        return np.zeros(self.nb)
+        self._rho_field = (self.fluid.rho if hasattr(self.fluid, "rho")
+                           else fem.Constant(self.mesh, float(case.fluid.density)))
 
     def _update_added_mass(self) -> None:
         """m̃_b = C_a ρ̄_b V_b with ρ̄_b the mean fluid density on block b's wetted (cut)
@@ -160,11 +161,8 @@ class CoupledModel:
         ca = self.case.coupling.added_mass
         if ca == 0.0:
             return
-        rho = self.fluid.rho if hasattr(self.fluid, "rho") else fem.Constant(self.mesh, float(self.case.fluid.density))
-        if not hasattr(self, "_rho_expr"):
-            self._rho_expr = rho
         # (negative fitted surface weights can overshoot a sharp ρ jump slightly: clip at 0)
-        rho_bar = np.maximum(np.nan_to_num(self.cut.wetted_mean(self.nb, self._rho_expr), nan=0.0), 0.0)
+        rho_bar = np.maximum(np.nan_to_num(self.cut.wetted_mean(self.nb, self._rho_field), nan=0.0), 0.0)
         st = self.system.state
         extra = ca * rho_bar * self.volume_b
         extra[st.fixed] = 0.0
