@@ -109,3 +109,24 @@ def test_case_reference_is_current():
     current = (ROOT / "docs" / "case-reference.md").read_text()
     assert current == reference_markdown(), \
         "docs/case-reference.md is stale: run python -m fcm_fsi.config.docs > docs/case-reference.md"
+
+
+def test_resolution_levels_merge_and_name_the_allowed_levels():
+    import copy
+    data = copy.deepcopy(GOOD)
+    data["resolutions"] = {"coarse": {"mesh": {"cells": [8, 8]}}, "fine": {"mesh": {"cells": [64, 64]}, "run": {"dt": 0.01}}}
+    data["resolution"] = "fine"
+    case = case_from_dict(data)
+    assert case.mesh.cells == (64, 64) and case.run.dt == 0.01 and case.mesh.upper == (1, 1)
+    data["resolution"] = "paper"
+    with pytest.raises(ConfigError, match="resolution.*'paper'.*allowed 'coarse', 'fine'"):
+        case_from_dict(data)
+    data["resolutions"]["fine"]["mesh"]["cells"] = [0, 4]          # a level's values are checked as usual
+    data["resolution"] = "fine"
+    with pytest.raises(ConfigError, match="mesh.cells"):
+        case_from_dict(data)
+    del data["resolutions"]
+    with pytest.raises(ConfigError, match="resolutions"):
+        case_from_dict(data)
+    paper = load_case(ROOT / "cases" / "tsunami_building.yaml", ["resolution=paper"])
+    assert paper.dem.dt == 1.0e-5 and paper.mesh.refine[0].size == 0.01

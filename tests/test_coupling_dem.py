@@ -145,6 +145,15 @@ def test_rotated_box_block_corners_lie_on_its_extreme_sphere_surfaces():
     assert np.all(np.abs(local) + r <= shapes.half[0] + 1e-12)
 
 
+def test_min_thickness_widens_thin_boxes_in_the_level_set_only():
+    """coupling.min_thickness: edges below it are widened about the centre; the DEM state is untouched."""
+    cfg = dem_config([box_block(axis=[1.0, 2.0, 3.0], angle=37.0, position=[0.3, -0.2, 0.5])])
+    st = build_state(cfg)
+    wide = shapes_of_blocks(cfg, st, min_thickness=0.15)
+    np.testing.assert_allclose(wide.half[0], [0.1, 0.075, 0.075])
+    np.testing.assert_allclose(shapes_of_blocks(cfg, st).half[0], [0.1, 0.06, 0.04])
+
+
 def test_every_block_kind_is_covered_in_state_order():
     """Box, sphere, clump, generated clumps and builder blocks: one box per box block, the
     clump's own spheres (same world centres as the DEM's), builder boxes matching lo..hi."""

@@ -61,6 +61,54 @@ def test_kernel_matches_reference(cutoff):
     np.testing.assert_array_equal(owner, owner_ref)
 
 
+@pytest.mark.parametrize("gap", [0.01, 0.05])
+def test_gap_fill_kernel_matches_reference(gap):
+    """Gap fill between distinct owners (bodies, static shapes, walls as one owner): kernel = NumPy."""
+    rng = np.random.default_rng(5)
+    shapes = random_shapes(rng, 60, nbodies=20)
+    pos, quat = random_poses(rng, 20)
+    walls = np.array([[0, 0, 0, 0, 0, 1.0], [0, 0, 0, 1.0, 0, 0], [1.0, 0, 0, -2.0, 0, 0]])   # floor, two ends
+    x = rng.uniform(0.0, 1.0, (4000, 3))
+    x[:1000] = pos[rng.integers(20, size=1000)] + rng.normal(scale=0.03, size=(1000, 3))
+    cutoff = 0.1
+    ls = StructureLevelSet(shapes, 20, cutoff, gap=gap, walls=walls)
+    phi, owner = ls.evaluate(x, pos, quat)
+    on_wall = np.zeros(len(x), bool)
+    phi_ref, owner_ref = signed_distance_reference(x, shapes, pos, quat, cutoff, gap=gap, walls=walls,
+                                                   on_wall=on_wall)
+    plain, _ = signed_distance_reference(x, shapes, pos, quat, cutoff)
+    np.testing.assert_allclose(phi, phi_ref, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(owner, owner_ref)
+    np.testing.assert_array_equal(ls.on_wall, on_wall)
+    assert 0 < on_wall.sum() < (phi < plain - 1e-12).sum()   # fills against walls and between bodies
+    filled = (phi < 0) & (plain > 0)
+    assert filled.sum() > 10                      # the test sees fill (19 and 250 points)
+    assert np.all(phi <= plain + 1e-12) and np.all(owner[filled] >= -1)   # a union; fill never owned by a wall
+
+
+def test_gap_fill_closes_a_sub_gap_layer_under_a_block():
+    """A block 1 mm above the floor: the layer under it is solid with gap 5 mm, fluid without;
+    the fill ends where block and floor are farther than the gap apart; tank corners stay fluid."""
+    block = Shapes.box((0, 0, 0), (0.2, 0.1, 0.1), body=0)
+    pos, quat = np.array([[0.5, 0.051, 0.0]]), np.array([[1.0, 0, 0, 0]])
+    floor_and_end = np.array([[0, 0, 0, 0, 1.0, 0], [0, 0, 0, 1.0, 0, 0]])
+    x = np.array([[0.5, 0.0005, 0.0],     # under the block, mid-gap
+                  [0.5, 0.0, 0.0],        # on the floor under the block
+                  [0.603, 0.0005, 0.0],   # 3 mm beyond the block's edge: d1 + d2 = 0.0005 + 0.0030...
+                  [0.65, 0.0005, 0.0],    # 5 cm beyond the edge: fluid
+                  [0.001, 0.001, 0.0]])   # tank corner, far from the block
+    ls = StructureLevelSet(block, 1, 0.1, gap=0.005, walls=floor_and_end)
+    phi, owner = ls.evaluate(x, pos, quat)
+    d_block = np.hypot(0.003, 0.001 - 0.0005)
+    np.testing.assert_allclose(phi[:3], [0.5 * (0.0005 + 0.0005 - 0.005), 0.5 * (0.001 - 0.005),
+                                         0.5 * (0.0005 + d_block - 0.005)], atol=1e-15)
+    assert np.all(owner[:3] == 0) and phi[3] > 0 and phi[4] > 0
+    # on_wall also marks fluid points where the fill is the nearer surface (ū continuous across it)
+    np.testing.assert_array_equal(ls.on_wall, [True, True, True, True, False])
+    plain, _ = StructureLevelSet(block, 1, 0.1).evaluate(x, pos, quat)
+    assert np.all(plain[:3] > 0) and 0 < phi[3] < plain[3]
+
+
 def test_sphere_distance():
     c, r = np.array([0.3, -0.2, 0.1]), 0.25
     u = np.array([2.0, -1.0, 2.0]) / 3.0

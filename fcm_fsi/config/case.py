@@ -63,14 +63,45 @@ class Case:
         return "dem"
 
 
+RESOLUTION_DOC = """\
+Resolution levels: a case may list named variants under the top-level key `resolutions`
+(name → a mapping with the same layout as the case, merged over it) and pick one with
+`resolution: <name>` (or `--set resolution=<name>`). Example: `cases/tsunami_building.yaml`
+(`coarse`, `paper`). The merge replaces scalars and lists and descends into mappings; the
+merged case is validated as usual."""
+
+
 def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
-    """Load and validate a case file, applying ``key.path=value`` overrides."""
+    """Load and validate a case file, applying ``key.path=value`` overrides, then its
+    resolution level (``resolution`` / ``resolutions``, see :data:`RESOLUTION_DOC`)."""
     data = read_yaml(Path(path))
     for assignment in overrides:
         apply_override(data, assignment)
-    return build(Case, data, source=str(path))
+    return build(Case, apply_resolution(data, str(path)), source=str(path))
 
 
 def case_from_dict(data: dict, source: str = "<dict>") -> Case:
     """Build a case from a mapping (tests and the verification runner)."""
-    return build(Case, data, source=source)
+    return build(Case, apply_resolution(data, source), source=source)
+
+
+def apply_resolution(data: dict, source: str) -> dict:
+    """``data`` with the chosen ``resolutions[resolution]`` merged in and both keys removed."""
+    data = dict(data)
+    levels = data.pop("resolutions", None)
+    chosen = data.pop("resolution", None)
+    if levels is None and chosen is None:
+        return data
+    if not isinstance(levels, dict) or not levels or not all(isinstance(v, dict) for v in levels.values()):
+        raise ConfigError(f"{source}: key 'resolutions' must map level names to case mappings "
+                          f"(needed when 'resolution' is given)")
+    if chosen not in levels:
+        raise ConfigError(f"{source}: key 'resolution' = {chosen!r}: allowed {', '.join(map(repr, levels))}")
+    return _merged(data, levels[chosen])
+
+
+def _merged(base: dict, extra: dict) -> dict:
+    out = dict(base)
+    for key, value in extra.items():
+        out[key] = _merged(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out

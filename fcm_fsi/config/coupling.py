@@ -24,6 +24,21 @@ class CouplingConfig:
                  "β ρ/Δt (u − ū) (its reaction is part of the block load) and β × the PSPG term, so nodes with "
                  "tiny fluid support follow the wall and the pressure extends smoothly into the body; 0 = off "
                  "(then the full floating_box level diverges at the contact line, docs/coupling.md)", ge=0, le=100)
+    gap_fill: float | None = param(
+        None, unit="m", doc="fluid gaps narrower than this between a block and a DEM plane/box wall or another block "
+                            "count as solid: level set min(φ, (d₁ + d₂ − δ)/2) over the two nearest owners, the fill "
+                            "moving with the nearer block (a sub-cell gap under a block resting on the floor otherwise "
+                            "squeezes it to the floor, docs/coupling.md); default = the smallest cell; 0 = off; "
+                            "must be below the level-set band", ge=0)
+    min_thickness: float = param(0.0, unit="m", doc="box blocks (and structure blocks) thinner than this are widened "
+                                                  "to it in the fluid's level set only (the DEM keeps their true "
+                                                  "size): a wall thinner than about one cell falls between the mesh "
+                                                  "nodes and lets water through", ge=0)
+    force_relaxation: float = param(
+        1.0, doc="ω: the DEM gets ω × the new fluid load + (1 − ω) × the load it got last step (torque alike); < 1 "
+                 "damps the step-to-step oscillation of the explicit coupling (contact chatter of a block on the "
+                 "floor fed back through the fluid) at the price of a lag of about (1 − ω)/ω fluid steps; 1 = off",
+        gt=0, le=1)
     force_mode: Literal["hold", "linear"] = param(
         "hold", doc="fluid load over the DEM sub-steps: hold = constant; linear = ramp from the previous exchange")
     added_mass: float = param(0.0, doc="C_a of the added-mass stabilisation: each block's DEM inertia is raised by "

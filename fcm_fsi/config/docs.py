@@ -8,7 +8,7 @@ import dataclasses
 import sys
 from typing import get_type_hints
 
-from .case import Case
+from .case import RESOLUTION_DOC, Case
 from .fields import range_text
 from .loader import _is_optional, type_name
 
@@ -34,7 +34,8 @@ def _default_text(f: dataclasses.Field) -> str:
 def reference_markdown() -> str:
     lines = ["# Case-file reference", "",
              "Generated from the schema by `python -m fcm_fsi.config.docs > docs/case-reference.md`;",
-             "a test fails when this file is stale. Units are SI. Unknown keys are errors.", ""]
+             "a test fails when this file is stale. Units are SI. Unknown keys are errors.", "",
+             RESOLUTION_DOC, ""]
     seen: set[type] = set()
     queue: list[tuple[str, type]] = [("(top level)", Case)]
     while queue:

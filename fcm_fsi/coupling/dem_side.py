@@ -52,11 +52,13 @@ REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # com
 
 
 # ------------------------------------------------------------------ level-set primitives
-def shapes_of_blocks(cfg: DEMConfig, state: DEMState) -> Shapes:
+def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0) -> Shapes:
     """Level-set primitives of every block of ``build_state(cfg)`` in its body (principal)
     frame: a box block is one solid box of its size [m], sphere and clump blocks are the union
     of their spheres, structure blocks are the boxes lo..hi of the builder. The world shape of
-    block b is ``pos[b] + R(quat[b]) (offset + rot x_shape)``."""
+    block b is ``pos[b] + R(quat[b]) (offset + rot x_shape)``. Box edges shorter than
+    ``min_thickness`` [m] are widened to it about the box centre (``coupling.min_thickness``:
+    a wall thinner than a cell would otherwise fall between the mesh nodes and leak)."""
     parts, first = [], 0
     for b, count in _described_blocks(cfg):
         blocks = np.arange(first, first + count)
@@ -64,17 +66,43 @@ def shapes_of_blocks(cfg: DEMConfig, state: DEMState) -> Shapes:
             density = cfg.materials[cfg.material_index(b.material)].density
             # R_body: principal → description frame, so the box axes in the body frame are its
             # transpose; the solid box's centre is its centre of mass (offset 0).
-            parts.append(_boxes(blocks, 0.5 * np.asarray(b.size), template_of(b, density).R_body.T))
+            parts.append(_boxes(blocks, np.maximum(0.5 * np.asarray(b.size), 0.5 * min_thickness),
+                                template_of(b, density).R_body.T))
         else:
             parts.append(_spheres(state, blocks))
         first += count
     structure = build_structure(cfg)
     if structure is not None:   # builder blocks: axis-aligned boxes at identity orientation
-        parts.append(_boxes(first + np.arange(structure.nb), 0.5 * (structure.hi - structure.lo), np.eye(3)))
+        parts.append(_boxes(first + np.arange(structure.nb),
+                            np.maximum(0.5 * (structure.hi - structure.lo), 0.5 * min_thickness), np.eye(3)))
         first += structure.nb
     if first != state.nb:
         raise ValueError(f"the DEM config describes {first} blocks but the state has {state.nb}")
     return Shapes.concat(parts)
+
+
+def gap_walls(cfg: DEMConfig, gdim: int) -> np.ndarray:
+    """Planes (np, 6) = point [m], normal into the domain, of the DEM's permanent plane and
+    box walls, for the level set's gap fill (``coupling.gap_fill``). Walls with ``remove_at``
+    (gates) and triangle meshes are left out; for a 2D fluid (points at z = 0) so are planes
+    whose normal has a z component (they bound the blocks' depth, not the fluid)."""
+    rows = []
+    for w in cfg.walls:
+        if w.remove_at is not None:
+            continue
+        if w.kind == "plane":
+            rows.append([*w.point, *w.normal])
+        elif w.kind == "box":
+            for d in range(3):
+                for corner, sgn in ((w.lo, 1.0), (w.hi, -1.0)):
+                    if not (d == 2 and sgn < 0 and w.open_top):
+                        n = np.zeros(3)
+                        n[d] = sgn
+                        rows.append([*corner, *n])
+    planes = np.array(rows, np.float64).reshape(-1, 6)
+    if gdim == 2:
+        planes = planes[np.abs(planes[:, 5]) == 0.0]
+    return planes
 
 
 def _described_blocks(cfg: DEMConfig):

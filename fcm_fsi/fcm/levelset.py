@@ -48,6 +48,7 @@ from fcm_fsi.dem.state import quat_to_matrix_np
 SPHERE, BOX, CYLINDER = 0, 1, 2
 NO_SHAPE = -2            # owner of points with no primitive within the cutoff
 STATIC = -1              # body index of a static (world-frame) primitive
+WALL = -3                # the walls, as one owner of the gap-fill search (never returned)
 
 
 # --------------------------------------------------------------------------- shapes
@@ -263,13 +264,25 @@ def _point_cell(x, lo, dims, cell):
 
 
 @numba.njit(cache=True, parallel=True)
-def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, start, items, phi, owner):
+def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, start, items,
+              planes, gap, phi, owner, on_wall):
     """Clipped union distance φ and owner body at every point; returns the number of
-    (point, primitive) candidates read from the bins (the search cost)."""
+    (point, primitive) candidates read from the bins (the search cost).
+
+    With ``gap`` > 0 the fluid between two different owners (bodies, the static shapes, or
+    the walls ``planes`` (np, 6) = point, unit normal into the fluid) is filled where the two
+    nearest are less than ``gap`` apart: φ = min(φ, (d₁ + d₂ − gap)/2), d₁ ≤ d₂ the
+    distances to the nearest two owners (all walls count as one, so tank corners are not
+    filled); the fill belongs to the nearer non-wall owner, and ``on_wall`` marks the points
+    where the fill between a body and a wall attains φ — inside it and in the fluid next to
+    it, so that the wall velocity (the fill rests with the wall) is continuous across its
+    surface."""
     tests = 0
     for i in numba.prange(x.shape[0]):
         best = cutoff
         arg = -1
+        d1, o1 = cutoff, NO_SHAPE           # nearest owner and the nearest other owner (gap fill)
+        d2, o2 = cutoff, NO_SHAPE
         c = _point_cell(x[i], lo, dims, cell)
         if c >= 0:
             for k in range(start[c], start[c + 1]):
@@ -287,10 +300,35 @@ def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, st
                 if d < best:
                     best = d
                     arg = s
+                if gap > 0.0:
+                    d1, o1, d2, o2 = _two_nearest(d, body[s], d1, o1, d2, o2)
             tests += start[c + 1] - start[c]
         phi[i] = max(best, -cutoff)
         owner[i] = NO_SHAPE if arg < 0 else body[arg]
+        if gap > 0.0 and arg >= 0:
+            for w in range(planes.shape[0]):
+                d = ((x[i, 0] - planes[w, 0]) * planes[w, 3] + (x[i, 1] - planes[w, 1]) * planes[w, 4]
+                     + (x[i, 2] - planes[w, 2]) * planes[w, 5])
+                d1, o1, d2, o2 = _two_nearest(d, WALL, d1, o1, d2, o2)
+            fill = 0.5 * (d1 + d2 - gap)
+            if o2 != NO_SHAPE and fill < phi[i]:
+                phi[i] = max(fill, -cutoff)
+                owner[i] = o2 if o1 == WALL else o1
+                on_wall[i] = o1 == WALL or o2 == WALL
     return tests
+
+
+@numba.njit(cache=True, inline="always")
+def _two_nearest(d, o, d1, o1, d2, o2):
+    """Update (d₁, o₁) = the nearest candidate and (d₂, o₂) = the nearest one of another
+    owner with candidate distance d of owner o."""
+    if o == o1:
+        return min(d, d1), o1, d2, o2
+    if d < d1:
+        return d, o, d1, o1
+    if d < d2:
+        return d1, o1, d, o
+    return d1, o1, d2, o2
 
 
 # --------------------------------------------------------------------------- interface
@@ -302,9 +340,16 @@ class StructureLevelSet:
     (point, primitive) candidates read from the bins, and (primitive, cell) listings.
     """
 
-    def __init__(self, shapes: Shapes, nbodies: int, cutoff: float):
+    def __init__(self, shapes: Shapes, nbodies: int, cutoff: float, gap: float = 0.0, walls=None):
+        """``gap`` [m] and ``walls`` (np, 6) (a point and the normal into the fluid per plane):
+        fluid gaps narrower than ``gap`` between two bodies, or a body and a wall, count as
+        solid (see :func:`_evaluate`); 0 ≤ gap < cutoff."""
         if not cutoff > 0:
             raise ValueError(f"cutoff = {cutoff}: must be > 0 [m]")
+        if not 0.0 <= gap < cutoff:
+            raise ValueError(f"gap = {gap}: allowed 0 ≤ gap < cutoff = {cutoff} [m]")
+        self.gap = float(gap)
+        self.walls = _unit_planes(walls)
         if len(shapes) and shapes.body.max() >= nbodies:
             raise ValueError(f"Shapes.body refers to body {shapes.body.max()}, but nbodies = {nbodies}")
         self.shapes = shapes
@@ -316,6 +361,7 @@ class StructureLevelSet:
         self._max_cells = 64 * len(shapes) + 4096
         self.pair_tests = 0
         self.bin_entries = 0
+        self.on_wall = np.zeros(0, bool)
 
     def evaluate(self, x: np.ndarray, body_pos: np.ndarray, body_quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """φ and owner at the points ``x`` (n, 3) [m] (2D meshes pass z = 0).
@@ -323,7 +369,8 @@ class StructureLevelSet:
         ``body_pos`` (nbodies, 3) [m] and unit ``body_quat`` (nbodies, 4) = (w, x, y, z),
         body → world. Returns φ (n,) [m], > 0 in the fluid, < 0 inside the structure, clipped
         to [−cutoff, cutoff], and owner (n,) int64: the body of the primitive attaining the
-        minimum (−1 static), −2 where no primitive is closer than the cutoff.
+        minimum (−1 static), −2 where no primitive is closer than the cutoff. With a gap fill,
+        ``self.on_wall`` (n,) marks the filled points between a body and a wall afterwards.
         """
         x = np.ascontiguousarray(x, np.float64)
         body_pos = np.ascontiguousarray(body_pos, np.float64).reshape(self.nbodies, 3)
@@ -332,6 +379,7 @@ class StructureLevelSet:
             raise ValueError(f"points x: shape {x.shape}, expected (n, 3)")
         phi = np.full(x.shape[0], self.cutoff)
         owner = np.full(x.shape[0], NO_SHAPE, np.int64)
+        self.on_wall = np.zeros(x.shape[0], bool)
         self.pair_tests = self.bin_entries = 0
         if not len(self.shapes):
             return phi, owner
@@ -340,9 +388,20 @@ class StructureLevelSet:
         lo, dims, cell = _grid(centre, self._reach, self._cell, self._max_cells)
         start, items = _bin_shapes(centre, self._reach, lo, dims, cell)
         self.pair_tests = _evaluate(x, s.kind, s.body, s.half, self._radius, centre, R, self.cutoff,
-                                    lo, dims, cell, start, items, phi, owner)
+                                    lo, dims, cell, start, items, self.walls, self.gap, phi, owner,
+                                    self.on_wall)
         self.bin_entries = items.shape[0]
         return phi, owner
+
+
+def _unit_planes(walls) -> np.ndarray:
+    """Planes (np, 6): point [m] and unit normal, from rows of point + any non-zero normal."""
+    p = np.zeros((0, 6)) if walls is None else np.array(walls, np.float64).reshape(-1, 6)
+    n = np.linalg.norm(p[:, 3:], axis=1)
+    if np.any(n == 0):
+        raise ValueError("walls: a plane normal is the zero vector")
+    p[:, 3:] /= n[:, None]
+    return np.ascontiguousarray(p)
 
 
 # --------------------------------------------------------------------------- reference
@@ -355,9 +414,10 @@ def _box_distance_reference(p: np.ndarray, half: np.ndarray) -> np.ndarray:
     return np.where(gap > 0, gap, -depth)
 
 
-def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: float):
+def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: float, gap: float = 0.0,
+                              walls=None, on_wall=None):
     """Brute-force NumPy reference of :meth:`StructureLevelSet.evaluate` (all points × all
-    primitives). Each primitive reduces to a box in its symmetry coordinates: a sphere is the
+    primitives, and the gap fill from the per-owner minima). Each primitive reduces to a box in its symmetry coordinates: a sphere is the
     interval |ρ₃| ≤ r in the distance ρ₃ from its centre, a cylinder the rectangle
     |ρ| ≤ r, |z| ≤ h/2 in (radial distance, axial coordinate)."""
     x = np.asarray(x, np.float64)
@@ -384,4 +444,29 @@ def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: fl
     near = dmin < cutoff
     phi[near] = np.maximum(dmin[near], -cutoff)
     owner[near] = shapes.body[arg[near]]
+    if gap > 0:
+        _gap_fill_reference(x, d, shapes.body, _unit_planes(walls), cutoff, gap, near, phi, owner,
+                            np.zeros(len(x), bool) if on_wall is None else on_wall)
     return phi, owner
+
+
+def _gap_fill_reference(x, d, body, planes, cutoff, gap, near, phi, owner, on_wall):
+    """φ = min(φ, (d₁ + d₂ − gap)/2) over the two nearest distinct owners (walls = one owner)."""
+    owners = np.unique(body)
+    per_owner = np.stack([d[:, body == o].min(axis=1) for o in owners], axis=1)
+    if len(planes):
+        wall = np.einsum("npk,pk->np", x[:, None, :] - planes[None, :, :3], planes[:, 3:]).min(axis=1)
+        per_owner = np.column_stack([per_owner, wall])
+        owners = np.append(owners, WALL)
+    per_owner = np.minimum(per_owner, cutoff)
+    if per_owner.shape[1] < 2:
+        return
+    order = np.argsort(per_owner, axis=1, kind="stable")
+    rows = np.arange(len(x))
+    d1, d2 = per_owner[rows, order[:, 0]], per_owner[rows, order[:, 1]]
+    o1, o2 = owners[order[:, 0]], owners[order[:, 1]]
+    fill = 0.5 * (d1 + d2 - gap)
+    use = near & (d2 < cutoff) & (fill < phi)
+    phi[use] = np.maximum(fill[use], -cutoff)
+    owner[use] = np.where(o1 == WALL, o2, o1)[use]
+    on_wall[use] = ((o1 == WALL) | (o2 == WALL))[use]

@@ -22,6 +22,12 @@ def setup_logging(level: str = "INFO", rank: int | None = None, logfile: str | N
         from mpi4py import MPI
         rank = MPI.COMM_WORLD.rank
     logger = logging.getLogger(LOGGER_NAME)
+    # ffcx's basicConfig gives the root logger a handler, and every JIT build (cffi →
+    # distutils) sets the root level to INFO, printing compiler command lines: keep the root
+    # handlers to warnings (a handler's level is not touched by distutils)
+    logging.basicConfig()            # no-op when ffcx already did it; makes a later call a no-op
+    for h in logging.getLogger().handlers:
+        h.setLevel(logging.WARNING)
     for h in list(logger.handlers):
         logger.removeHandler(h)
     logger.propagate = False

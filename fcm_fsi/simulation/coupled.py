@@ -42,7 +42,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..config.case import Case
-from ..coupling.dem_side import DEMSubcycler, shapes_of_blocks
+from ..config.loader import ConfigError
+from ..coupling.dem_side import DEMSubcycler, gap_walls, shapes_of_blocks
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain
 from ..fcm.levelset import StructureLevelSet
@@ -87,10 +88,17 @@ class CoupledModel:
         self.added_mass = np.zeros(self.nb)         # m̃ per block, set every step (_update_added_mass)
         self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
         self.alpha_ang = np.zeros((self.nb, 3))
+        self.relaxed_load = np.zeros((2 * self.nb, 3))   # force; torque applied last step (force_relaxation)
         self.depth = 1.0 if self.gdim == 3 else float(cp.depth)
         h_max = comm.allreduce(float(cell_sizes(self.mesh).max(initial=0.0)), op=MPI.MAX)
         self.band = cp.band if cp.band is not None else 2.0 * h_max
-        self.levelset = StructureLevelSet(shapes_of_blocks(case.dem, st), self.nb, self.band)
+        self.gap = self.h_min if cp.gap_fill is None else float(cp.gap_fill)
+        if self.gap >= self.band:
+            raise ConfigError(f"key 'coupling.gap_fill' = {self.gap:.4g} m: allowed 0 ≤ gap_fill < the level-set "
+                              f"band {self.band:.4g} m (coupling.band, default 2 × the largest cell)")
+        self.levelset = StructureLevelSet(shapes_of_blocks(case.dem, st, cp.min_thickness), self.nb, self.band,
+                                          gap=self.gap,
+                                          walls=gap_walls(case.dem, self.gdim))
         self.points = np.zeros((self.cut.nodes.shape[0], 3))
         self.points[:, : self.gdim] = self.cut.nodes[:, : self.gdim]
         self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
@@ -138,9 +146,15 @@ class CoupledModel:
                               ("tx", "N m"), ("ty", "N m"), ("tz", "N m")):
                 cols[key] = unit
             self.bodies_csv = TimeSeriesCSV(Path(out_dir) / "bodies.csv", cols, comm.rank, append=False)
-        log.info("coupled: %d blocks, %d spheres; DEM dt %.4g s; level-set band %.4g m; cut cells %d, "
-                 "smallest cut fraction %.2e", self.nb, st.ns, self.system.dt, self.band, self.stats.cut_cells,
-                 self.stats.min_cut_fraction)
+        self.breaks_csv = None
+        if out_dir is not None and self.bonds is not None:
+            from ..io.csv import TimeSeriesCSV
+            self.breaks_csv = TimeSeriesCSV(Path(out_dir) / "bond_breaks.csv",
+                                            {"t": "s", "bond": "-", "block_a": "-", "block_b": "-"}, comm.rank)
+            self._broken_before = self.bonds.broken_bonds()
+        log.info("coupled: %d blocks, %d spheres; DEM dt %.4g s; level-set band %.4g m, gap fill %.4g m "
+                 "(%d walls); cut cells %d, smallest cut fraction %.2e", self.nb, st.ns, self.system.dt, self.band,
+                 self.gap, len(self.levelset.walls), self.stats.cut_cells, self.stats.min_cut_fraction)
 
     def _remember_own_inertia(self, case: Case) -> None:
         """Each block's own mass, inertia and volume V_b = m_b/ρ_material, and the fluid
@@ -171,16 +185,23 @@ class CoupledModel:
         st.inertia[:] = self.inertia0 * (1.0 + extra / self.mass0)[:, None]
 
     def _stabilised_load(self) -> tuple[np.ndarray, np.ndarray]:
-        """Fluid load + m̃ aⁿ − m̃ g and torque + R Ĩ Rᵀ αⁿ (body-frame Ĩ = I m̃/(m + m̃))."""
+        """Fluid load (relaxed: ω F + (1 − ω) × the last relaxed load) + m̃ aⁿ − m̃ g and
+        torque + R Ĩ Rᵀ αⁿ (body-frame Ĩ = I m̃/(m + m̃))."""
+        w = self.case.coupling.force_relaxation
+        if w < 1.0:
+            self.relaxed_load[:] = w * np.concatenate([self.force, self.torque]) + (1.0 - w) * self.relaxed_load
+            force, torque = self.relaxed_load[: self.nb], self.relaxed_load[self.nb:]
+        else:
+            force, torque = self.force, self.torque
         if not self.added_mass.any():
-            return self.force, self.torque
+            return force.copy(), torque.copy()
         st = self.system.state
         g = np.asarray(self.case.dem.gravity)
-        F = self.force + self.added_mass[:, None] * (self.accel - g[None, :])
+        F = force + self.added_mass[:, None] * (self.accel - g[None, :])
         R = st.rotation_matrices()
         I_tilde = self.inertia0 * (self.added_mass / self.mass0)[:, None]
         body = np.einsum("bji,bj->bi", R, self.alpha_ang) * I_tilde
-        T = self.torque + np.einsum("bij,bj->bi", R, body)
+        T = torque + np.einsum("bij,bj->bi", R, body)
         return F, T
 
     # -------------------------------------------------------------- stages
@@ -189,6 +210,7 @@ class CoupledModel:
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
         ubar = self.dem.rigid_velocity(self.points, owner)[:, : self.gdim]
+        ubar[self.levelset.on_wall] = 0.0      # the gap fill between a block and a wall rests with the wall
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         return self.cut.update(level, owner, ubar)
@@ -309,6 +331,19 @@ class CoupledModel:
         if self.ns.step_count % self.case.coupling.check_every == 0:
             self.dem.check_replicated(self.comm)
         self._write_bodies(t + dt)
+        self._record_bond_breaks(t + dt)
+
+    def _record_bond_breaks(self, t: float) -> None:
+        """Append the bonds that broke during this step to ``bond_breaks.csv`` (time, bond,
+        its two blocks): the failure sequence of a structure."""
+        if self.bonds is None or self.breaks_csv is None:
+            return
+        now = self.bonds.broken_bonds()
+        new = np.flatnonzero(now & ~self._broken_before)
+        self._broken_before = now
+        for bond in new:
+            p = np.flatnonzero(self.bonds.pt_bond == bond)[0]
+            self.breaks_csv.write(t=t, bond=bond, block_a=self.bonds.pt_a[p], block_b=self.bonds.pt_b[p])
 
     def _exchange_error(self, dt: float, stabilisation: np.ndarray, fluid_side: np.ndarray) -> float:
         """|fluid impulse the DEM integrated + momentum the fluid received| / scale, the
@@ -409,6 +444,7 @@ class CoupledModel:
                 for name, a in it.checkpoint_arrays().items():
                     out[f"dem_int{k}__{name}"] = np.copy(a)
         out["coupling__accel"] = np.concatenate([self.accel, self.alpha_ang])
+        out["coupling__relaxed_load"] = self.relaxed_load.copy()
         if self.system.ledger is not None:
             out["dem__ledger"] = np.copy(self.system.ledger.checkpoint_arrays()["ledger"])
         return out
@@ -420,6 +456,8 @@ class CoupledModel:
             a[...] = g[f"dem__{name}"]
         st.t, st.step = float(g["dem__time"][0]), int(g["dem__time"][1])
         self.accel[:], self.alpha_ang[:] = g["coupling__accel"][: self.nb], g["coupling__accel"][self.nb:]
+        if "coupling__relaxed_load" in g:
+            self.relaxed_load[:] = g["coupling__relaxed_load"]
         for k, it in enumerate(self.system.interactions):
             if hasattr(it, "restore"):
                 prefix = f"dem_int{k}__"

@@ -191,3 +191,76 @@ def _plot_dam_break_block(out: Path, t, series, x0, y0, tb, theta) -> None:
     fig.tight_layout()
     fig.savefig(out / "dam_break_block.png", dpi=110)
     plt.close(fig)
+
+
+#: friction angles [deg] of the paper's three block_overturn runs
+OVERTURN_FRICTION = (30.0, 20.0, 15.0)
+
+
+@register("block_overturn", "surge overturns a mortar block over a stopper; sliding after toppling grows as "
+                            "friction falls (paper §4(3), 2D fluid)", issue=8)
+def block_overturn(level, out_dir: Path, comm) -> list[Metric]:
+    """``cases/block_overturn.yaml`` at friction 30°, 20° and 15°: quick 128 × 32 cells
+    (h = 12.5 mm, the block 4 cells long) to t = 1.0 s, full 320 × 80 (5 mm) to 1.2 s.
+
+    The tracked point is the block's upstream top corner (the paper's Fig. 15–16 plot a point
+    on the block). overturned = 1 when, at every friction, the block ends turned by more than
+    45° — past the tipping angle atan(b/H) = 26.6° at which its centre of mass passes over the
+    stopper, so it cannot return. Sliding after toppling = the centre's x travel from the first
+    time it is turned by 45° to the end; sliding_monotone = 1 when it grows strictly from 30° to
+    20° to 15°. volume_error as in ``dam_break_block`` (the worst of the three runs)."""
+    results = {}
+    metrics = []
+    for phi in OVERTURN_FRICTION:
+        data = case_at_level("block_overturn", level, out_dir, quick_t_end=1.0, quick_cells=[128, 32])
+        data["name"] = f"block_overturn_f{phi:g}"
+        data["dem"]["materials"][0]["friction_angle"] = phi
+        series, wall, failure = run_coupled(data, out_dir, comm)
+        blk = data["dem"]["blocks"][0]
+        tb, theta = rotation_angle_z(out_dir / data["name"] / "bodies.csv")
+        b = read_series(out_dir / data["name"] / "bodies.csv")
+        sel = b["block"] == 0
+        half_b, half_h = 0.5 * blk["size"][0], 0.5 * blk["size"][1]
+        th = np.radians(theta)
+        px = b["x"][sel] + np.cos(th) * (-half_b) - np.sin(th) * half_h      # upstream top corner
+        py = b["y"][sel] + np.sin(th) * (-half_b) + np.cos(th) * half_h
+        tipped = np.flatnonzero(np.abs(theta) > 45.0)
+        slide = float(b["x"][sel][-1] - b["x"][sel][tipped[0]]) if tipped.size else float("nan")
+        results[phi] = dict(t=tb, theta=theta, dx=px - px[0], dy=py - py[0], slide=slide,
+                            completed=failure is None, final=float(abs(theta[-1])),
+                            water=float(np.abs(series["water_fluid_error"]).max()),
+                            exchange=float(series["exchange_error"].max()), wall=wall, t_end=float(series["t"][-1]))
+        metrics += [report_only(f"final_rotation_deg_f{phi:g}", results[phi]["final"], unit="deg",
+                                note=f"t reached {results[phi]['t_end']:.3g} s, wall {wall:.0f} s"),
+                    report_only(f"sliding_after_toppling_f{phi:g}", slide, unit="m")]
+    slides = [results[p]["slide"] for p in OVERTURN_FRICTION]
+    if comm.rank == 0:
+        _plot_block_overturn(out_dir, results)
+    return [at_least("completed", float(all(r["completed"] for r in results.values())), 1.0),
+            at_least("overturned", float(all(r["final"] > 45.0 for r in results.values())), 1.0),
+            at_least("sliding_monotone", float(bool(np.all(np.diff(slides) > 0))), 1.0),
+            at_most("volume_error", max(r["water"] for r in results.values()), 5e-3),
+            at_most("exchange_error", max(r["exchange"] for r in results.values()), 1e-10),
+            *metrics,
+            report_only("wall_seconds", sum(r["wall"] for r in results.values()),
+                        note=f"three runs, {data['mesh']['cells']} cells, t_end {data['run']['t_end']} s")]
+
+
+def _plot_block_overturn(out: Path, results: dict) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(1, 3, figsize=(13, 3.6))
+    for phi, r in results.items():
+        ax[0].plot(r["t"], r["dx"], label=f"friction {phi:g}°")
+        ax[1].plot(r["t"], r["dy"], label=f"friction {phi:g}°")
+        ax[2].plot(r["t"], r["theta"], label=f"friction {phi:g}°")
+    ax[0].set_ylabel("x displacement of the tracked point [m]")
+    ax[1].set_ylabel("y displacement of the tracked point [m]")
+    ax[2].set_ylabel("rotation about z [deg]")
+    for a in ax:
+        a.set_xlabel("t [s]"), a.grid(alpha=0.3), a.legend(fontsize=8)
+    fig.suptitle("block overturned by a surge (tracked point: upstream top corner)")
+    fig.tight_layout()
+    fig.savefig(out / "block_overturn.png", dpi=110)
+    plt.close(fig)
