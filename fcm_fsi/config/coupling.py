@@ -39,6 +39,16 @@ class CouplingConfig:
                  "damps the step-to-step oscillation of the explicit coupling (contact chatter of a block on the "
                  "floor fed back through the fluid) at the price of a lag of about (1 − ω)/ω fluid steps; 1 = off",
         gt=0, le=1)
+    iterations: int = param(
+        1, doc="passes of the fluid ⇄ DEM fixed-point iteration per fluid step: 1 = explicit (staggered); > 1 "
+               "retakes the step from the same start, the fluid's wall velocity being the blocks' velocity at the "
+               "end of the step from the last pass (Aitken-relaxed), until `iteration_tol` (implicit coupling: the "
+               "added mass drops out of the stability condition; each pass costs one fluid step)", ge=1, le=50)
+    iteration_tol: float = param(1.0e-3, doc="converged when max |Δv| (ω × radius of gyration for rotations) ≤ this × "
+                                             "max(max |v|, iteration_velocity)", gt=0, lt=1)
+    iteration_velocity: float = param(1.0e-2, unit="m/s", doc="velocity scale floor of iteration_tol (blocks at rest)",
+                                      gt=0)
+    iteration_relaxation: float = param(0.5, doc="first relaxation factor of the Aitken iteration", gt=0, le=1)
     force_mode: Literal["hold", "linear"] = param(
         "hold", doc="fluid load over the DEM sub-steps: hold = constant; linear = ramp from the previous exchange")
     added_mass: float = param(0.0, doc="C_a of the added-mass stabilisation: each block's DEM inertia is raised by "

@@ -89,6 +89,11 @@ class CoupledModel:
         self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
         self.alpha_ang = np.zeros((self.nb, 3))
         self.relaxed_load = np.zeros((2 * self.nb, 3))   # force; torque applied last step (force_relaxation)
+        # radius of gyration [m] (rotations enter the iteration residual as ω × it)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.sqrt(st.inertia.sum(axis=1) / (2.0 * st.mass))
+        self.gyration = np.where(np.isfinite(g) & (g > 0), g, 1.0)
+        self.iterations_done, self.iteration_residual = 1, 0.0
         self.depth = 1.0 if self.gdim == 3 else float(cp.depth)
         h_max = comm.allreduce(float(cell_sizes(self.mesh).max(initial=0.0)), op=MPI.MAX)
         self.band = cp.band if cp.band is not None else 2.0 * h_max
@@ -118,6 +123,7 @@ class CoupledModel:
         self.output_functions = list(self.fluid.output_functions) + [self.cut.level_set]
         self.series_units = {**self.fluid.series_units, "cut_cells": "-", "min_cut_fraction": "-",
                              "dem_substeps": "-", "dem_dt_margin": "-", "exchange_error": "-", "retried_steps": "-",
+                             "coupling_iterations": "-", "coupling_residual": "-",
                              "force_x": "N", "force_y": "N", "force_z": "N"}
         for b in range(min(self.nb, SERIES_BLOCKS)):
             for key, unit in (("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"),
@@ -129,10 +135,16 @@ class CoupledModel:
             # phase field is solved on the whole mesh, so water can diffuse into a block
             cf = self.cut.fluid_fraction
             phi = self.fluid.pf.phi
-            self._water_forms = (fem.form(phi * cf * self.cut.dx_q), fem.form(phi * (1 - cf) * self.cut.dx_q))
+            # and the liquid {φ ≥ ½} inside the blocks (indicator at the quadrature points): the
+            # liquid volume of the fluid part is the exact whole-mesh {φ ≥ ½} volume minus it
+            liquid = ufl.conditional(ufl.ge(phi, 0.5), 1.0, 0.0)
+            self._water_forms = (fem.form(phi * cf * self.cut.dx_q), fem.form(phi * (1 - cf) * self.cut.dx_q),
+                                 fem.form(liquid * (1 - cf) * self.cut.dx_q))
             self.series_units.update({"water_fluid_part": "m^d", "water_in_blocks": "m^d",
-                                      "water_fluid_error": "-"})
+                                      "water_fluid_error": "-", "liquid_volume_fluid": "m^d",
+                                      "liquid_volume_error": "-"})
             self.water0 = self.comm.allreduce(fem.assemble_scalar(self._water_forms[0]), op=MPI.SUM)
+            self.liquid0 = self._liquid_volume_fluid()
         self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
         if self.bonds is not None:
             self.series_units["broken_bonds"] = "-"
@@ -205,11 +217,19 @@ class CoupledModel:
         return F, T
 
     # -------------------------------------------------------------- stages
-    def rebuild_cut(self):
-        """(a): level set, cut weights and wall velocity from the current block poses."""
+    def rebuild_cut(self, velocities: np.ndarray | None = None):
+        """(a): level set, cut weights and wall velocity from the current block poses; the
+        wall velocity from the blocks' current v, ω, or from ``velocities`` (the iterated
+        unknown of :meth:`_block_velocities`)."""
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
-        ubar = self.dem.rigid_velocity(self.points, owner)[:, : self.gdim]
+        if velocities is None:
+            ubar = self.dem.rigid_velocity(self.points, owner)[:, : self.gdim]
+        else:
+            from ..coupling.dem_side import rigid_body_velocity
+            v = velocities.reshape(2 * self.nb, 3)
+            ubar = rigid_body_velocity(st.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None],
+                                       self.points, owner)[:, : self.gdim]
         ubar[self.levelset.on_wall] = 0.0      # the gap fill between a block and a wall rests with the wall
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
@@ -301,11 +321,55 @@ class CoupledModel:
             self.fluid.update_properties(phi)
 
     def _advance(self, t: float, dt: float, timer: StageTimer) -> None:
-        with timer("cut rebuild"):
-            self.stats = self.rebuild_cut()
+        """One step; with ``coupling.iterations`` > 1 a fixed-point iteration on the block
+        velocities at tⁿ⁺¹ (wall velocity ū of the fluid ⇄ result of the DEM sub-steps) with
+        Aitken relaxation, every pass from the same start state (fluid, phase field, DEM)."""
+        cp = self.case.coupling
+        st = self.system.state
+        if cp.iterations == 1:
+            with timer("cut rebuild"):
+                self.stats = self.rebuild_cut()
+            F, fluid_side = self._fluid_then_dem(t, dt, timer)
+        else:
+            start = self._snapshot()
+            guess = self._block_velocities()
+            r_old, omega = None, cp.iteration_relaxation
+            for k in range(cp.iterations):
+                if k:
+                    self._restore(start)
+                with timer("cut rebuild"):
+                    self.stats = self.rebuild_cut(velocities=guess)
+                F, fluid_side = self._fluid_then_dem(t, dt, timer)
+                result = self._block_velocities()
+                r = result - guess
+                scale = max(float(np.abs(result).max(initial=0.0)), cp.iteration_velocity)
+                self.iteration_residual = float(np.abs(r).max(initial=0.0)) / scale
+                self.iterations_done = k + 1
+                if self.iteration_residual <= cp.iteration_tol:
+                    break
+                if r_old is not None:                    # Aitken's Δ² relaxation factor
+                    dr = r - r_old
+                    denom = float(dr @ dr)
+                    if denom > 0:
+                        omega = float(np.clip(-omega * (r_old @ dr) / denom, 0.05, 1.0))
+                guess = guess + omega * r
+                r_old = r
+            else:
+                log.debug("t = %.6g s: coupling iteration not converged after %d passes (residual %.2e)",
+                          t, cp.iterations, self.iteration_residual)
+        self.exchange_error = self._exchange_error(dt, F - self.force, fluid_side)
+        self._check_dem(t + dt)
+        if self.ns.step_count % self.case.coupling.check_every == 0:
+            self.dem.check_replicated(self.comm)
+        self._write_bodies(t + dt)
+        self._record_bond_breaks(t + dt)
+
+    def _fluid_then_dem(self, t: float, dt: float, timer: StageTimer):
+        """Fluid step on the current cut, the exchange, and the DEM sub-steps; returns the
+        load the DEM got and the momentum the fluid received from the wall term."""
+        st = self.system.state
         self.fluid.advance(t, dt, timer)
         with timer("exchange"):
-            st = self.system.state
             centres = st.pos[:, : self.gdim] if self.gdim == 2 else st.pos
             force, torque = self.cut.body_forces(self.nb, centres)
             self.force[:] = 0.0
@@ -326,12 +390,12 @@ class CoupledModel:
                 self.system.dt = self.case.dem.dt
             self.accel[:] = (st.vel - v0) / dt
             self.alpha_ang[:] = (st.omega - w0) / dt
-        self.exchange_error = self._exchange_error(dt, F - self.force, fluid_side)
-        self._check_dem(t + dt)
-        if self.ns.step_count % self.case.coupling.check_every == 0:
-            self.dem.check_replicated(self.comm)
-        self._write_bodies(t + dt)
-        self._record_bond_breaks(t + dt)
+        return F, fluid_side
+
+    def _block_velocities(self) -> np.ndarray:
+        """v and ω × radius of gyration of every block, flattened [m/s] (the iterated unknown)."""
+        st = self.system.state
+        return np.concatenate([st.vel, st.omega * self.gyration[:, None]]).ravel()
 
     def _record_bond_breaks(self, t: float) -> None:
         """Append the bonds that broke during this step to ``bond_breaks.csv`` (time, bond,
@@ -413,7 +477,9 @@ class CoupledModel:
         ex = self.dem.last
         diag.update({"cut_cells": float(self.stats.cut_cells), "min_cut_fraction": self.stats.min_cut_fraction,
                      "dem_substeps": float(ex.n_sub if ex else 0), "dem_dt_margin": float(ex.dt_over_dt_cr if ex else 0),
-                     "exchange_error": self.exchange_error, "retried_steps": float(self.retried)})
+                     "exchange_error": self.exchange_error, "retried_steps": float(self.retried),
+                     "coupling_iterations": float(self.iterations_done),
+                     "coupling_residual": self.iteration_residual})
         total = self.force.sum(axis=0)
         diag.update({"force_x": total[0], "force_y": total[1], "force_z": total[2]})
         for b in range(min(self.nb, SERIES_BLOCKS)):
@@ -422,12 +488,20 @@ class CoupledModel:
                 diag[f"b{b}_v{key}"] = st.vel[b, k]
                 diag[f"b{b}_w{key}"] = st.omega[b, k]
         if self._water_forms is not None:
-            wf, wb = (self.comm.allreduce(fem.assemble_scalar(f), op=MPI.SUM) for f in self._water_forms)
+            wf, wb = (self.comm.allreduce(fem.assemble_scalar(f), op=MPI.SUM) for f in self._water_forms[:2])
+            lv = self._liquid_volume_fluid()
             diag.update({"water_fluid_part": wf, "water_in_blocks": wb,
-                         "water_fluid_error": (wf - self.water0) / self.water0})
+                         "water_fluid_error": (wf - self.water0) / self.water0,
+                         "liquid_volume_fluid": lv, "liquid_volume_error": (lv - self.liquid0) / self.liquid0})
         if self.bonds is not None:
             diag["broken_bonds"] = float(np.count_nonzero(self.bonds.broken_bonds()))
         return diag
+
+    def _liquid_volume_fluid(self) -> float:
+        """|{φ ≥ ½}| of the fluid part [m^d]: the exact whole-mesh volume the volume correction
+        holds, minus the liquid inside the blocks (collective)."""
+        inside = self.comm.allreduce(fem.assemble_scalar(self._water_forms[2]), op=MPI.SUM)
+        return self.fluid.pf.volume()[0] - inside
 
     def health(self, diag: dict[str, float]) -> str | None:
         return self.fluid.health(diag)
