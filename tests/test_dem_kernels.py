@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from fcm_fsi.dem.bodies import box_template, clump_template, update_sphere_positions
-from fcm_fsi.dem.contact import (HIST, closest_point_triangle, gather_pair_forces, pair_forces,
-                                 pair_forces_ref, wall_forces, wall_forces_ref)
+from fcm_fsi.dem.contact import (HIST, closest_point_triangle, gather_pair_forces, history_held, material_table,
+                                 pair_forces, pair_forces_ref, wall_forces, wall_forces_ref)
 from fcm_fsi.dem.integrate import drift, drift_ref, kick
 from fcm_fsi.dem.neighbours import build_pairs, build_pairs_ref, carry_history, sphere_pair_map
 from fcm_fsi.dem.state import DEMState
@@ -48,18 +48,26 @@ def test_cell_list_pairs_match_kdtree(skin):
     np.testing.assert_array_equal(p, r)
 
 
-def test_pair_forces_match_numpy_reference():
+@pytest.mark.parametrize("zero_rows", [False, True])
+def test_pair_forces_match_numpy_reference(zero_rows):
+    """zero_rows: a random half of the pairs start with an all-zero history (held = 0), the
+    others with a random one — both the skip and the full path, and the held/act flags."""
     st, rng = random_state()
     pairs = build_pairs(st.sph_pos, st.sph_radius, st.sph_block, 0.001)
     hist = rng.normal(scale=1e-4, size=(len(pairs), HIST))
+    if zero_rows:
+        hist[rng.uniform(size=len(pairs)) < 0.5] = 0.0
     for clip in (True, False):
         h1 = hist.copy()
-        pf, px = np.zeros((len(pairs), 3)), np.zeros((len(pairs), 3))
-        es, dd, df, nc = pair_forces(pairs, h1, st.sph_pos, st.sph_radius, st.sph_block, st.sph_material, st.pos,
-                                     st.vel, st.omega, st.mass, st.fixed, *MAT, clip, 1e-5, pf, px)
+        held = history_held(h1)
+        np.testing.assert_array_equal(held, np.any(hist != 0, axis=1))
+        act = rng.integers(0, 2, len(pairs)).astype(np.uint8)      # stale flags must not matter
+        pf, px = rng.normal(size=(len(pairs), 3)), rng.normal(size=(len(pairs), 3))   # nor stale forces
+        es, dd, df, nc = pair_forces(pairs, h1, held, act, st.sph_pos, st.sph_radius, st.sph_block, st.sph_material,
+                                     st.pos, st.vel, st.omega, st.mass, st.fixed, *MAT, clip, 1e-5, pf, px)
         F, T = np.zeros_like(st.pos), np.zeros_like(st.pos)
         s0, sp, sg = sphere_pair_map(pairs, st.ns)
-        gather_pair_forces(st.blk_sph_start, st.pos, s0, sp, sg, pf, px, F, T)
+        gather_pair_forces(st.blk_sph_start, st.pos, s0, sp, sg, act, pf, px, F, T)
         Fr, Tr, hr, (er, dr, fr) = pair_forces_ref(pairs, hist, st.sph_pos, st.sph_radius, st.sph_block,
                                                    st.sph_material, st.pos, st.vel, st.omega, st.mass, st.fixed,
                                                    *MAT, clip, 1e-5)
@@ -68,19 +76,31 @@ def test_pair_forces_match_numpy_reference():
         np.testing.assert_allclose(T, Tr, rtol=1e-10, atol=1e-11)
         np.testing.assert_allclose(h1, hr, rtol=1e-10, atol=1e-16)
         np.testing.assert_allclose([es, dd, df], [er, dr, fr], rtol=1e-9, atol=1e-15)
+        # held ⇔ the new history is non-zero; in contact ⇒ act
+        np.testing.assert_array_equal(held.astype(bool), np.any(hr != 0, axis=1))
+        d = np.linalg.norm(st.sph_pos[pairs[:, 1]] - st.sph_pos[pairs[:, 0]], axis=1)
+        on = d < st.sph_radius[pairs[:, 0]] + st.sph_radius[pairs[:, 1]]
+        assert np.all(act[on] == 1) and np.all(act[~on & (np.abs(hist).sum(1) == 0)] == 0)
+        if zero_rows:
+            assert np.count_nonzero(on & (np.abs(hist).sum(1) == 0)) > 3    # onsets from a zero history
 
 
-def test_wall_forces_match_numpy_reference():
+@pytest.mark.parametrize("zero_rows", [False, True])
+def test_wall_forces_match_numpy_reference(zero_rows):
+    """zero_rows: a random half of the sphere–wall histories start all zero (held = 0)."""
     st, rng = random_state()
     planes = np.array([[0, 0, 1, 0.01], [1, 0, 0, 0.02], [0, -1, 0, -0.07]], float)
     hist = rng.normal(scale=1e-4, size=(st.ns, 3, HIST))
+    if zero_rows:
+        hist[rng.uniform(size=(st.ns, 3)) < 0.5] = 0.0
     pm = np.array([0, 1, 1])
     for clip in (True, False):
         h1 = hist.copy()
+        held = np.any(h1 != 0, axis=2).astype(np.uint8)
         F, T = np.zeros_like(st.pos), np.zeros_like(st.pos)
         e = wall_forces(st.blk_sph_start, st.sph_pos, st.sph_radius, st.sph_material, st.pos, st.vel, st.omega,
                         st.mass, st.fixed, planes, pm, np.zeros((0, 3, 3)), np.zeros(0, np.int64),
-                        np.zeros(0, np.int64), 0, np.ones(3, bool), h1, *MAT, clip, 1e-5, F, T)
+                        np.zeros(0, np.int64), 0, np.ones(3, bool), h1, held, *MAT, clip, 1e-5, F, T)
         Fr, Tr, hr, er = wall_forces_ref(st.blk_sph_start, st.sph_pos, st.sph_radius, st.sph_material, st.sph_block,
                                          st.pos, st.vel, st.omega, st.mass, st.fixed, planes, pm, hist, *MAT, clip, 1e-5)
         assert np.count_nonzero(np.any(Fr != 0, axis=1)) > 5
@@ -88,6 +108,8 @@ def test_wall_forces_match_numpy_reference():
         np.testing.assert_allclose(T, Tr, rtol=1e-10, atol=1e-11)
         np.testing.assert_allclose(h1, hr, rtol=1e-10, atol=1e-16)
         np.testing.assert_allclose(e, er, rtol=1e-9, atol=1e-15)
+        live = ~st.fixed[st.sph_block]
+        np.testing.assert_array_equal(held[live].astype(bool), np.any(hr[live] != 0, axis=2))
 
 
 def test_closest_point_on_triangle_matches_brute_force():
@@ -121,6 +143,39 @@ def test_drift_and_kick_match_numpy_reference():
     np.testing.assert_allclose(omega[free], wr[free], rtol=1e-10, atol=1e-12)
 
 
+def test_material_table_matches_mixing_rules():
+    k, kt, h, mu = MAT
+    tab = material_table(*MAT)
+    for a in range(2):
+        for b in range(2):
+            np.testing.assert_array_equal(tab[a, b], [2 * k[a] * k[b] / (k[a] + k[b]),
+                                                      2 * kt[a] * kt[b] / (kt[a] + kt[b]),
+                                                      0.5 * (h[a] + h[b]), min(mu[a], mu[b])])
+
+
+def test_cos_sin_series_matches_library_to_rounding():
+    from fcm_fsi.dem.integrate import _cos_sin
+    import numba as nb
+
+    @nb.njit
+    def many(a):
+        c = np.empty_like(a)
+        s = np.empty_like(a)
+        for i in range(a.shape[0]):
+            c[i], s[i] = _cos_sin(a[i])
+        return c, s
+
+    rng = np.random.default_rng(5)
+    a = np.concatenate([rng.uniform(-0.0625, 0.0625, 20000), 10.0 ** rng.uniform(-12, -1.2, 5000),
+                        rng.uniform(-3, 3, 1000), [0.0, 0.0624999, -0.0625, 0.0625]])
+    c, s = many(a)
+    import math
+    cr = np.array([math.cos(x) for x in a])      # the C library (np.cos may use a SIMD version)
+    sr = np.array([math.sin(x) for x in a])
+    assert np.all(np.abs(c - cr) <= np.spacing(np.abs(cr)))     # within one ulp
+    assert np.all(np.abs(s - sr) <= np.spacing(np.abs(sr)))
+
+
 def test_history_carried_over_on_rebuild():
     old = np.array([[0, 3], [1, 2], [2, 5]], np.int64)
     hist = np.arange(3 * HIST, dtype=float).reshape(3, HIST) + 1
@@ -129,6 +184,27 @@ def test_history_carried_over_on_rebuild():
     np.testing.assert_array_equal(h[0], hist[0])
     np.testing.assert_array_equal(h[1], 0.0)
     np.testing.assert_array_equal(h[2], hist[2])
+
+
+def test_history_carry_over_matches_dict_reference():
+    rng = np.random.default_rng(4)
+    ns = 500
+
+    def random_pairs(n):
+        i = rng.integers(0, ns - 1, n)
+        j = i + 1 + rng.integers(0, 30, n)
+        p = np.unique(np.stack([i, np.minimum(j, ns - 1)], axis=1), axis=0)
+        return p[p[:, 0] < p[:, 1]].astype(np.int64)
+
+    old, new = random_pairs(3000), random_pairs(3000)
+    hist = rng.normal(size=(len(old), HIST))
+    hist[rng.uniform(size=len(old)) < 0.5] = 0.0
+    ref = {tuple(p): h for p, h in zip(old.tolist(), hist)}
+    h = carry_history(old, hist, new, ns)
+    expect = np.array([ref.get(tuple(p), np.zeros(HIST)) for p in new.tolist()])
+    assert np.count_nonzero(np.any(expect != 0, axis=1)) > 100
+    np.testing.assert_array_equal(h, expect)
+    assert carry_history(np.zeros((0, 2), np.int64), np.zeros((0, HIST)), new, ns).shape == (len(new), HIST)
 
 
 def test_box_and_clump_mass_properties():

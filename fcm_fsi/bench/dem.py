@@ -16,7 +16,10 @@ Set-up (reproducible; the same packing can be given to another DEM code):
   clipped at zero; Verlet skin 1.5 mm (0.3 r), rebuild at skin/2
 - dt = 2.5e-5 s (≈ 0.17 Δt_cr); 20 warm-up steps, then ``--steps`` timed steps; ledger off
 - sphere-steps/s = N·steps / wall; contact updates/s = Σ over timed steps of active
-  sphere–sphere contacts / wall; pair evaluations/s = Σ Verlet pairs / wall
+  sphere–sphere contacts / wall; pair evaluations/s = Σ Verlet pairs / wall; load = the
+  1-minute load average just before the timed steps (other people's jobs on the machine)
+- no ledger and no controls, so the step runs fused (fcm_fsi/dem/fused.py: the pair kernel,
+  then one pass over the blocks)
 """
 from __future__ import annotations
 
@@ -67,6 +70,7 @@ def measure(n_spheres: int, threads: int, steps: int) -> dict:
     s.run(20)
     builds0 = contact.neighbours.builds
     ncon = npair = 0
+    load = os.getloadavg()[0]
     t0 = time.perf_counter()
     for _ in range(steps):
         s.step()
@@ -77,31 +81,36 @@ def measure(n_spheres: int, threads: int, steps: int) -> dict:
     return {"spheres": ns, "threads": threads, "steps": steps, "wall": wall,
             "sphere_steps_per_s": ns * steps / wall, "contact_updates_per_s": ncon / wall,
             "pair_evals_per_s": npair / wall, "contacts_per_sphere": ncon / steps / ns,
-            "rebuilds": contact.neighbours.builds - builds0, "dt_over_dt_cr": s.dt / s.critical_time_step()}
+            "rebuilds": contact.neighbours.builds - builds0, "dt_over_dt_cr": s.dt / s.critical_time_step(),
+            "load": load}
 
 
 def table(rows: list[dict]) -> str:
-    out = ["| spheres | threads | steps | wall [s] | sphere-steps/s | contact updates/s | pair evals/s | contacts/sphere | list rebuilds |",
-           "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    out = ["| spheres | threads | steps | wall [s] | sphere-steps/s | contact updates/s | pair evals/s | contacts/sphere | list rebuilds | load |",
+           "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         out.append(f"| {r['spheres']} | {r['threads']} | {r['steps']} | {r['wall']:.2f} | {r['sphere_steps_per_s']:.3g} | "
-                   f"{r['contact_updates_per_s']:.3g} | {r['pair_evals_per_s']:.3g} | {r['contacts_per_sphere']:.2f} | {r['rebuilds']} |")
+                   f"{r['contact_updates_per_s']:.3g} | {r['pair_evals_per_s']:.3g} | {r['contacts_per_sphere']:.2f} | "
+                   f"{r['rebuilds']} | {r.get('load', float('nan')):.1f} |")
     return "\n".join(out)
 
 
 def write_docs(rows: list[dict], path: Path) -> None:
     """Replace (or append) the ``## DEM`` section of docs/performance.md."""
     import platform
-    head = ("## DEM\n\n`python -m fcm_fsi.bench dem --write-docs` (fcm_fsi/bench/dem.py). Set-up, exactly:\n\n"
+    best = max((r["sphere_steps_per_s"] for r in rows if r["spheres"] >= 99999), default=0.0)
+    goal = ("reached" if best >= 5e6 else f"not reached (best {best:.3g} at 100k)")
+    head = ("## DEM\n\n`NUMBA_NUM_THREADS=2 python -m fcm_fsi.bench dem --write-docs` (fcm_fsi/bench/dem.py; "
+            "defaults: 10k and 100k spheres, 1 and 2 threads, 200 steps). Set-up, exactly:\n\n"
             + "\n".join(line[2:] if line.startswith("  ") else line for line in
                         (__doc__.split("Set-up (reproducible; the same packing can be given to another DEM code):")[1]
                          .strip("\n").splitlines()))
             + f"\n\nMachine: {platform.processor() or platform.machine()}, {os.cpu_count()} logical cores, "
-              f"load average {os.getloadavg()[0]:.1f} when the table was written (the cores were shared "
-              "with other jobs: the 2-thread rows measure contention, not scaling); Numba kernels cached "
-              "(compile time excluded). contacts/sphere = active sphere–sphere contacts (pairs) per "
+              f"load average {os.getloadavg()[0]:.1f} when the table was written (per row: the load column; "
+              "with other jobs on the cores the 2-thread rows measure contention, not scaling); Numba kernels "
+              "cached (compile time excluded). contacts/sphere = active sphere–sphere contacts (pairs) per "
               "sphere and step; wall contacts are computed but not counted. Goal of issue #6: "
-              "≥ 5e6 sphere-steps/s at 100k spheres on 2 cores — not reached (see docs/dem.md §5).\n\n")
+              f"≥ 5e6 sphere-steps/s at 100k spheres on 2 cores — {goal} (see docs/dem.md §5).\n\n")
     body = head + table(rows) + "\n"
     text = path.read_text() if path.exists() else "# Performance\n"
     m = re.search(r"^## DEM\n.*?(?=^## |\Z)", text, flags=re.S | re.M)
@@ -123,7 +132,8 @@ def run(argv: list[str]) -> int:
             rows.append(r)
             print(f"{r['spheres']:>8} spheres, {th} thread(s): {r['sphere_steps_per_s']:.3g} sphere-steps/s, "
                   f"{r['contact_updates_per_s']:.3g} contact updates/s ({r['wall']:.2f} s, "
-                  f"{r['contacts_per_sphere']:.2f} contacts/sphere, dt/Δt_cr = {r['dt_over_dt_cr']:.3f})", flush=True)
+                  f"{r['contacts_per_sphere']:.2f} contacts/sphere, dt/Δt_cr = {r['dt_over_dt_cr']:.3f}, "
+                  f"load {r['load']:.1f})", flush=True)
     print(table(rows))
     if a.write_docs:
         write_docs(rows, Path(__file__).resolve().parents[2] / "docs" / "performance.md")

@@ -125,3 +125,15 @@ def update_sphere_positions(pos, quat, sph_block, sph_local, sph_pos):
         sph_pos[s, 0] = pos[b, 0] + rx
         sph_pos[s, 1] = pos[b, 1] + ry
         sph_pos[s, 2] = pos[b, 2] + rz
+
+
+@nb.njit(cache=True, inline="always")
+def _place_block_spheres(b, pos, quat, blk_sph_start, sph_local, sph_pos):
+    """sph_pos[s] = pos[b] + R(q_b) sph_local[s] for the spheres of block b (as
+    :func:`update_sphere_positions`)."""
+    for s in range(blk_sph_start[b], blk_sph_start[b + 1]):
+        rx, ry, rz = rotate(quat[b, 0], quat[b, 1], quat[b, 2], quat[b, 3],
+                            sph_local[s, 0], sph_local[s, 1], sph_local[s, 2])
+        sph_pos[s, 0] = pos[b, 0] + rx
+        sph_pos[s, 1] = pos[b, 1] + ry
+        sph_pos[s, 2] = pos[b, 2] + rz

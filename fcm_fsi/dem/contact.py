@@ -261,16 +261,125 @@ def _mix(mat_k, mat_kt, mat_h, mat_mu, a, b):
     return k, kt, 0.5 * (mat_h[a] + mat_h[b]), min(mat_mu[a], mat_mu[b])
 
 
+@nb.njit(cache=True)
+def material_table(mat_k, mat_kt, mat_h, mat_mu):
+    """(nmat, nmat, 4) table of the mixed (k, k_t, h, μ) of every material pair (:func:`_mix`)."""
+    nm = mat_k.shape[0]
+    tab = np.empty((nm, nm, 4))
+    for a in range(nm):
+        for b in range(nm):
+            k, kt, h, mu = _mix(mat_k, mat_kt, mat_h, mat_mu, a, b)
+            tab[a, b, 0] = k
+            tab[a, b, 1] = kt
+            tab[a, b, 2] = h
+            tab[a, b, 3] = mu
+    return tab
+
+
+@nb.njit(cache=True)
+def history_held(hist):
+    """1 where a history row (last axis) has a non-zero entry, else 0 (uint8)."""
+    n = hist.shape[0]
+    m = hist.shape[1]
+    out = np.zeros(n, np.uint8)
+    for p in range(n):
+        for q in range(m):
+            if hist[p, q] != 0.0:
+                out[p] = 1
+                break
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def _pair_one(p, i, j, dx, dy, dz, dist, delta, hist, held, act, sph_pos, sph_radius, sph_block, sph_material,
+              pos, vel, omega, mass, fixed, tab, clip, dt, pair_f, pair_x):
+    """Pair p = (i, j) in contact (delta > 0) or with a history to release or reset
+    (see :func:`pair_forces`). Returns (spring energy, dashpot loss, slider loss, 1 if in
+    contact else 0)."""
+    if dist == 0.0:
+        act[p] = 0
+        return 0.0, 0.0, 0.0, 0
+    if delta <= 0.0 and hist[p, 3] == 0.0 and hist[p, 4] == 0.0 and hist[p, 5] == 0.0 and hist[p, 6] == 0.0 \
+            and hist[p, 7] <= 0.0:
+        # out of contact and nothing to release
+        for q in range(hist.shape[1]):
+            if hist[p, q] != 0.0:
+                hist[p, q] = 0.0
+        held[p] = 0
+        act[p] = 0
+        return 0.0, 0.0, 0.0, 0
+    nx = dx / dist
+    ny = dy / dist
+    nz = dz / dist
+    a = sph_radius[i] - 0.5 * delta
+    cx = sph_pos[i, 0] + a * nx
+    cy = sph_pos[i, 1] + a * ny
+    cz = sph_pos[i, 2] + a * nz
+    bi = sph_block[i]
+    bj = sph_block[j]
+    rix = cx - pos[bi, 0]
+    riy = cy - pos[bi, 1]
+    riz = cz - pos[bi, 2]
+    rjx = cx - pos[bj, 0]
+    rjy = cy - pos[bj, 1]
+    rjz = cz - pos[bj, 2]
+    ai = _pointvel(vel, omega, bi, rix, riy, riz)
+    aj = _pointvel(vel, omega, bj, rjx, rjy, rjz)
+    ux, uy, uz = ai[0] - aj[0], ai[1] - aj[1], ai[2] - aj[2]
+    if fixed[bi]:
+        mstar = mass[bj]
+    elif fixed[bj]:
+        mstar = mass[bi]
+    else:
+        mstar = mass[bi] * mass[bj] / (mass[bi] + mass[bj])
+    ma = sph_material[i]
+    mb = sph_material[j]
+    k = tab[ma, mb, 0]
+    kt = tab[ma, mb, 1]
+    h = tab[ma, mb, 2]
+    mu = tab[ma, mb, 3]
+    act[p] = 1
+    if delta <= 0.0:
+        dd, FN = _release(delta, nx, ny, nz, ux, uy, uz, hist[p], k, mstar, dt)
+        held[p] = 0
+        if FN == 0.0:
+            act[p] = 0
+        pair_f[p, 0] = -FN * nx
+        pair_f[p, 1] = -FN * ny
+        pair_f[p, 2] = -FN * nz
+        pair_x[p, 0] = cx
+        pair_x[p, 1] = cy
+        pair_x[p, 2] = cz
+        return 0.0, dd, 0.0, 0
+    c = 2.0 * h * math.sqrt(mstar * k)
+    ct = 2.0 * h * math.sqrt(mstar * kt)
+    fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[p], k, kt, c, ct, mu, clip, dt, mstar)
+    held[p] = 1
+    pair_f[p, 0] = fx
+    pair_f[p, 1] = fy
+    pair_f[p, 2] = fz
+    pair_x[p, 0] = cx
+    pair_x[p, 1] = cy
+    pair_x[p, 2] = cz
+    return es, dd, df, 1
+
+
 @nb.njit(cache=True, parallel=True)
-def pair_forces(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, vel, omega,
+def pair_forces(pairs, hist, held, act, sph_pos, sph_radius, sph_block, sph_material, pos, vel, omega,
                 mass, fixed, mat_k, mat_kt, mat_h, mat_mu, clip, dt, pair_f, pair_x):
     """Sphere–sphere contact over the Verlet pairs. Writes the force on sphere pairs[p,0]
-    into pair_f[p] and the contact point into pair_x[p]; resets the history of pairs out
-    of contact. Returns (stored spring energy, dashpot loss, slider loss, n_contacts)."""
+    into pair_f[p] and the contact point into pair_x[p] and sets ``act[p]`` = 1 when the pair
+    carries a force this step (``act[p]`` = 0: pair_f[p], pair_x[p] not written, nothing to
+    gather); resets the history of pairs out of contact. ``held[p]`` (uint8) is 1 where
+    hist[p] may be non-zero and 0 where it is all zero (kept up to date here): a pair out of
+    contact with held 0 is skipped after the distance test without reading its history (the
+    common case in a Verlet list). Returns (stored spring energy, dashpot loss, slider loss,
+    n_contacts)."""
     e_s = 0.0
     d_d = 0.0
     d_f = 0.0
     ncon = 0
+    tab = material_table(mat_k, mat_kt, mat_h, mat_mu)
     for p in nb.prange(pairs.shape[0]):
         i = pairs[p, 0]
         j = pairs[p, 1]
@@ -279,98 +388,57 @@ def pair_forces(pairs, hist, sph_pos, sph_radius, sph_block, sph_material, pos, 
         dz = sph_pos[j, 2] - sph_pos[i, 2]
         dist = math.sqrt(dx * dx + dy * dy + dz * dz)
         delta = sph_radius[i] + sph_radius[j] - dist
-        if dist == 0.0:
+        if delta <= 0.0 and held[p] == 0:
+            act[p] = 0                   # out of contact, history all zero: nothing to do
             continue
-        if delta <= 0.0 and hist[p, 3] == 0.0 and hist[p, 4] == 0.0 and hist[p, 5] == 0.0 and hist[p, 6] == 0.0 \
-                and hist[p, 7] <= 0.0:
-            # out of contact and nothing to release (the common case in a Verlet list)
-            for q in range(hist.shape[1]):
-                if hist[p, q] != 0.0:
-                    hist[p, q] = 0.0
-            pair_f[p, 0] = 0.0
-            pair_f[p, 1] = 0.0
-            pair_f[p, 2] = 0.0
-            continue
-        nx = dx / dist
-        ny = dy / dist
-        nz = dz / dist
-        a = sph_radius[i] - 0.5 * delta
-        cx = sph_pos[i, 0] + a * nx
-        cy = sph_pos[i, 1] + a * ny
-        cz = sph_pos[i, 2] + a * nz
-        bi = sph_block[i]
-        bj = sph_block[j]
-        rix = cx - pos[bi, 0]
-        riy = cy - pos[bi, 1]
-        riz = cz - pos[bi, 2]
-        rjx = cx - pos[bj, 0]
-        rjy = cy - pos[bj, 1]
-        rjz = cz - pos[bj, 2]
-        ai = _pointvel(vel, omega, bi, rix, riy, riz)
-        aj = _pointvel(vel, omega, bj, rjx, rjy, rjz)
-        ux, uy, uz = ai[0] - aj[0], ai[1] - aj[1], ai[2] - aj[2]
-        if fixed[bi]:
-            mstar = mass[bj]
-        elif fixed[bj]:
-            mstar = mass[bi]
-        else:
-            mstar = mass[bi] * mass[bj] / (mass[bi] + mass[bj])
-        k, kt, h, mu = _mix(mat_k, mat_kt, mat_h, mat_mu, sph_material[i], sph_material[j])
-        if delta <= 0.0:
-            dd, FN = _release(delta, nx, ny, nz, ux, uy, uz, hist[p], k, mstar, dt)
-            d_d += dd
-            pair_f[p, 0] = -FN * nx
-            pair_f[p, 1] = -FN * ny
-            pair_f[p, 2] = -FN * nz
-            pair_x[p, 0] = cx
-            pair_x[p, 1] = cy
-            pair_x[p, 2] = cz
-            continue
-        c = 2.0 * h * math.sqrt(mstar * k)
-        ct = 2.0 * h * math.sqrt(mstar * kt)
-        fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[p], k, kt, c, ct, mu, clip, dt, mstar)
-        pair_f[p, 0] = fx
-        pair_f[p, 1] = fy
-        pair_f[p, 2] = fz
-        pair_x[p, 0] = cx
-        pair_x[p, 1] = cy
-        pair_x[p, 2] = cz
+        es, dd, df, c = _pair_one(p, i, j, dx, dy, dz, dist, delta, hist, held, act, sph_pos, sph_radius, sph_block,
+                                  sph_material, pos, vel, omega, mass, fixed, tab, clip, dt, pair_f, pair_x)
         e_s += es
         d_d += dd
         d_f += df
-        ncon += 1
+        ncon += c
     return e_s, d_d, d_f, ncon
 
 
+@nb.njit(cache=True, inline="always")
+def _gather_block(b, blk_sph_start, pos, sp_start, sp_pair, sp_sign, act, pair_f, pair_x, force, torque):
+    """force[b] += Σ ±pair_f over the pairs of b's spheres with act[p] = 1, in CSR order;
+    torque about pos[b] likewise."""
+    fx = fy = fz = tx = ty = tz = 0.0
+    for s in range(blk_sph_start[b], blk_sph_start[b + 1]):
+        for k in range(sp_start[s], sp_start[s + 1]):
+            p = sp_pair[k]
+            if act[p] == 0:
+                continue
+            sg = sp_sign[k]
+            gx = sg * pair_f[p, 0]
+            gy = sg * pair_f[p, 1]
+            gz = sg * pair_f[p, 2]
+            if gx == 0.0 and gy == 0.0 and gz == 0.0:
+                continue
+            rx = pair_x[p, 0] - pos[b, 0]
+            ry = pair_x[p, 1] - pos[b, 1]
+            rz = pair_x[p, 2] - pos[b, 2]
+            fx += gx
+            fy += gy
+            fz += gz
+            tx += ry * gz - rz * gy
+            ty += rz * gx - rx * gz
+            tz += rx * gy - ry * gx
+    force[b, 0] += fx
+    force[b, 1] += fy
+    force[b, 2] += fz
+    torque[b, 0] += tx
+    torque[b, 1] += ty
+    torque[b, 2] += tz
+
+
 @nb.njit(cache=True, parallel=True)
-def gather_pair_forces(blk_sph_start, pos, sp_start, sp_pair, sp_sign, pair_f, pair_x, force, torque):
-    """force[b] += Σ ±pair_f over the pairs of b's spheres; torque about pos[b] likewise."""
+def gather_pair_forces(blk_sph_start, pos, sp_start, sp_pair, sp_sign, act, pair_f, pair_x, force, torque):
+    """force[b] += Σ ±pair_f over the pairs of b's spheres with act[p] = 1; torque about pos[b]
+    likewise (a fixed order per block: the result does not depend on the thread count)."""
     for b in nb.prange(pos.shape[0]):
-        fx = fy = fz = tx = ty = tz = 0.0
-        for s in range(blk_sph_start[b], blk_sph_start[b + 1]):
-            for k in range(sp_start[s], sp_start[s + 1]):
-                p = sp_pair[k]
-                sg = sp_sign[k]
-                gx = sg * pair_f[p, 0]
-                gy = sg * pair_f[p, 1]
-                gz = sg * pair_f[p, 2]
-                if gx == 0.0 and gy == 0.0 and gz == 0.0:
-                    continue
-                rx = pair_x[p, 0] - pos[b, 0]
-                ry = pair_x[p, 1] - pos[b, 1]
-                rz = pair_x[p, 2] - pos[b, 2]
-                fx += gx
-                fy += gy
-                fz += gz
-                tx += ry * gz - rz * gy
-                ty += rz * gx - rx * gz
-                tz += rx * gy - ry * gx
-        force[b, 0] += fx
-        force[b, 1] += fy
-        force[b, 2] += fz
-        torque[b, 0] += tx
-        torque[b, 1] += ty
-        torque[b, 2] += tz
+        _gather_block(b, blk_sph_start, pos, sp_start, sp_pair, sp_sign, act, pair_f, pair_x, force, torque)
 
 
 @nb.njit(cache=True)
@@ -411,88 +479,144 @@ def closest_point_triangle(px, py, pz, a, b, c):
     return a[0] + abx * v + acx * w, a[1] + aby * v + acy * w, a[2] + abz * v + acz * w
 
 
+@nb.njit(cache=True)
+def _wall_contact(s, w, b, r, px, py, pz, delta, nx, ny, nz, wm, sph_material, pos, vel, omega, mass,
+                  hist, held, tab, clip, dt, force, torque):
+    """One sphere–wall contact (or release) of sphere s of block b with wall w (normal n into
+    the sphere's side, overlap delta, wall material wm): adds into force[b], torque[b], updates
+    hist[s, w] and held[s, w]; returns (spring energy, dashpot loss, slider loss). Not inlined:
+    called only for the few spheres in reach of a wall."""
+    a = r - 0.5 * delta
+    cx = px + a * nx
+    cy = py + a * ny
+    cz = pz + a * nz
+    rx = cx - pos[b, 0]
+    ry = cy - pos[b, 1]
+    rz = cz - pos[b, 2]
+    ux, uy, uz = _pointvel(vel, omega, b, rx, ry, rz)
+    ma = sph_material[s]
+    k = tab[ma, wm, 0]
+    kt = tab[ma, wm, 1]
+    h = tab[ma, wm, 2]
+    mu = tab[ma, wm, 3]
+    if delta <= 0.0:
+        dd, FN = _release(delta, nx, ny, nz, ux, uy, uz, hist[s, w], k, mass[b], dt)
+        held[s, w] = 0
+        if FN != 0.0:
+            _add_load(force, torque, b, -FN * nx, -FN * ny, -FN * nz, rx, ry, rz)
+        return 0.0, dd, 0.0
+    c = 2.0 * h * math.sqrt(mass[b] * k)
+    ct = 2.0 * h * math.sqrt(mass[b] * kt)
+    fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[s, w],
+                                  k, kt, c, ct, mu, clip, dt, mass[b])
+    held[s, w] = 1
+    _add_load(force, torque, b, fx, fy, fz, rx, ry, rz)
+    return es, dd, df
+
+
+@nb.njit(cache=True)
+def _wall_one(s, w, b, r, px, py, pz, sph_material, pos, vel, omega, mass, planes, plane_mat, tris, tri_mesh,
+              mesh_mat, active, hist, held, tab, clip, dt, force, torque):
+    """Sphere s (of block b, centre p, radius r) against wall w when it is in reach or has a
+    history (see :func:`wall_forces`). Returns (spring energy, dashpot loss, slider loss)."""
+    npl = planes.shape[0]
+    if not active[w]:
+        delta = -1.0
+        nx, ny, nz = 0.0, 0.0, 1.0
+        wm = 0
+        hist[s, w, 7] = 0.0        # no release correction for a removed wall
+    elif w < npl:
+        gap = planes[w, 0] * px + planes[w, 1] * py + planes[w, 2] * pz - planes[w, 3]
+        delta = r - gap
+        nx, ny, nz = -planes[w, 0], -planes[w, 1], -planes[w, 2]
+        wm = plane_mat[w]
+    else:
+        m = w - npl
+        best = 1e300
+        qx = qy = qz = 0.0
+        for t in range(tris.shape[0]):
+            if tri_mesh[t] != m:
+                continue
+            cx, cy, cz = closest_point_triangle(px, py, pz, tris[t, 0], tris[t, 1], tris[t, 2])
+            d2 = (px - cx) ** 2 + (py - cy) ** 2 + (pz - cz) ** 2
+            if d2 < best:
+                best = d2
+                qx, qy, qz = cx, cy, cz
+        gap = math.sqrt(best)
+        delta = r - gap
+        if gap > 0.0:
+            nx, ny, nz = (qx - px) / gap, (qy - py) / gap, (qz - pz) / gap
+        else:
+            nx = ny = nz = 0.0
+        wm = mesh_mat[m]
+    if delta <= 0.0 and hist[s, w, 3] == 0.0 and hist[s, w, 4] == 0.0 and \
+            hist[s, w, 5] == 0.0 and hist[s, w, 6] == 0.0 and hist[s, w, 7] <= 0.0:
+        for q in range(hist.shape[2]):
+            if hist[s, w, q] != 0.0:
+                hist[s, w, q] = 0.0
+        held[s, w] = 0
+        return 0.0, 0.0, 0.0
+    if nx == 0.0 and ny == 0.0 and nz == 0.0:
+        for q in range(hist.shape[2]):
+            hist[s, w, q] = 0.0
+        held[s, w] = 0
+        return 0.0, 0.0, 0.0
+    return _wall_contact(s, w, b, r, px, py, pz, delta, nx, ny, nz, wm, sph_material, pos, vel, omega,
+                         mass, hist, held, tab, clip, dt, force, torque)
+
+
+@nb.njit(cache=True, inline="always")
+def _block_walls(b, blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omega, mass,
+                 planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, hist, held, tab, clip, dt,
+                 force, torque):
+    """Wall contacts of the spheres of (free) block b (see :func:`wall_forces`); adds into
+    force[b], torque[b]; returns (spring energy, dashpot loss, slider loss)."""
+    npl = planes.shape[0]
+    e_s = 0.0
+    d_d = 0.0
+    d_f = 0.0
+    for s in range(blk_sph_start[b], blk_sph_start[b + 1]):
+        r = sph_radius[s]
+        px, py, pz = sph_pos[s, 0], sph_pos[s, 1], sph_pos[s, 2]
+        for w in range(npl + nmesh):
+            if held[s, w] == 0:
+                if not active[w]:
+                    continue
+                if w < npl and r <= planes[w, 0] * px + planes[w, 1] * py + planes[w, 2] * pz - planes[w, 3]:
+                    continue                # out of reach, history all zero: nothing to do
+            es, dd, df = _wall_one(s, w, b, r, px, py, pz, sph_material, pos, vel, omega, mass, planes, plane_mat,
+                                   tris, tri_mesh, mesh_mat, active, hist, held, tab, clip, dt, force, torque)
+            e_s += es
+            d_d += dd
+            d_f += df
+    return e_s, d_d, d_f
+
+
 @nb.njit(cache=True, parallel=True)
 def wall_forces(blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omega, mass, fixed,
-                planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, hist,
+                planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, hist, held,
                 mat_k, mat_kt, mat_h, mat_mu, clip, dt, force, torque):
     """Sphere–wall contact: half-spaces ``planes`` (n_x, n_y, n_z, d) with the unit normal n
     pointing into the domain (spheres live where n·x ≥ d) and triangle meshes (one
     contact per sphere and mesh: the nearest triangle); walls with ``active[w]`` False are
-    skipped (their contacts released). History ``hist`` is (ns, nplanes +
-    nmesh, 3). Adds into force/torque; returns (spring energy, dashpot loss, slider loss)."""
-    npl = planes.shape[0]
+    skipped (their contacts released). History ``hist`` is (ns, nplanes + nmesh, HIST);
+    ``held`` (ns, nplanes + nmesh) uint8 is 1 where that history may be non-zero and 0 where
+    it is all zero (kept up to date here): a sphere out of reach of a plane with ``held`` 0
+    is skipped after the gap test, without touching its history (the common case).
+    Adds into force/torque; returns (spring energy, dashpot loss, slider loss)."""
+    tab = material_table(mat_k, mat_kt, mat_h, mat_mu)
     e_s = 0.0
     d_d = 0.0
     d_f = 0.0
     for b in nb.prange(pos.shape[0]):
         if fixed[b]:
             continue
-        for s in range(blk_sph_start[b], blk_sph_start[b + 1]):
-            r = sph_radius[s]
-            px, py, pz = sph_pos[s, 0], sph_pos[s, 1], sph_pos[s, 2]
-            for w in range(npl + nmesh):
-                if not active[w]:
-                    delta = -1.0
-                    nx, ny, nz = 0.0, 0.0, 1.0
-                    wm = 0
-                    hist[s, w, 7] = 0.0        # no release correction for a removed wall
-                elif w < npl:
-                    gap = planes[w, 0] * px + planes[w, 1] * py + planes[w, 2] * pz - planes[w, 3]
-                    delta = r - gap
-                    nx, ny, nz = -planes[w, 0], -planes[w, 1], -planes[w, 2]
-                    wm = plane_mat[w]
-                else:
-                    m = w - npl
-                    best = 1e300
-                    qx = qy = qz = 0.0
-                    for t in range(tris.shape[0]):
-                        if tri_mesh[t] != m:
-                            continue
-                        cx, cy, cz = closest_point_triangle(px, py, pz, tris[t, 0], tris[t, 1], tris[t, 2])
-                        d2 = (px - cx) ** 2 + (py - cy) ** 2 + (pz - cz) ** 2
-                        if d2 < best:
-                            best = d2
-                            qx, qy, qz = cx, cy, cz
-                    gap = math.sqrt(best)
-                    delta = r - gap
-                    if gap > 0.0:
-                        nx, ny, nz = (qx - px) / gap, (qy - py) / gap, (qz - pz) / gap
-                    else:
-                        nx = ny = nz = 0.0
-                    wm = mesh_mat[m]
-                if delta <= 0.0 and hist[s, w, 3] == 0.0 and hist[s, w, 4] == 0.0 and \
-                        hist[s, w, 5] == 0.0 and hist[s, w, 6] == 0.0 and hist[s, w, 7] <= 0.0:
-                    for q in range(hist.shape[2]):
-                        if hist[s, w, q] != 0.0:
-                            hist[s, w, q] = 0.0
-                    continue
-                if nx == 0.0 and ny == 0.0 and nz == 0.0:
-                    for q in range(hist.shape[2]):
-                        hist[s, w, q] = 0.0
-                    continue
-                a = r - 0.5 * delta
-                cx = px + a * nx
-                cy = py + a * ny
-                cz = pz + a * nz
-                rx = cx - pos[b, 0]
-                ry = cy - pos[b, 1]
-                rz = cz - pos[b, 2]
-                ux, uy, uz = _pointvel(vel, omega, b, rx, ry, rz)
-                k, kt, h, mu = _mix(mat_k, mat_kt, mat_h, mat_mu, sph_material[s], wm)
-                if delta <= 0.0:
-                    dd, FN = _release(delta, nx, ny, nz, ux, uy, uz, hist[s, w], k, mass[b], dt)
-                    d_d += dd
-                    if FN != 0.0:
-                        _add_load(force, torque, b, -FN * nx, -FN * ny, -FN * nz, rx, ry, rz)
-                    continue
-                c = 2.0 * h * math.sqrt(mass[b] * k)
-                ct = 2.0 * h * math.sqrt(mass[b] * kt)
-                fx, fy, fz, es, dd, df = _law(delta, nx, ny, nz, ux, uy, uz, hist[s, w],
-                                              k, kt, c, ct, mu, clip, dt, mass[b])
-                _add_load(force, torque, b, fx, fy, fz, rx, ry, rz)
-                e_s += es
-                d_d += dd
-                d_f += df
+        es, dd, df = _block_walls(b, blk_sph_start, sph_pos, sph_radius, sph_material, pos, vel, omega, mass,
+                                  planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, hist, held, tab,
+                                  clip, dt, force, torque)
+        e_s += es
+        d_d += dd
+        d_f += df
     return e_s, d_d, d_f
 
 
@@ -627,30 +751,48 @@ class SphereContact:
         self.clip = bool(clip_normal)
         self.neighbours = NeighbourList(skin)
         self.hist = np.zeros((0, HIST))
+        self.held = np.zeros(0, np.uint8)     # 1 where hist[p] may be non-zero
+        self.act = np.zeros(0, np.uint8)      # 1 where pair_f[p] is this step's force
         self.pair_f = np.zeros((0, 3))
         self.pair_x = np.zeros((0, 3))
         self.n_contacts = 0
 
-    def add_forces(self, state, force, torque, ledger, dt):
+    def pair_stage(self, state, dt):
+        """Verlet check (rebuild and history carry-over when needed) and the pair kernel:
+        fills pair_f, pair_x, act. Returns (spring energy, dashpot loss, slider loss)."""
         nl = self.neighbours
         if nl.needs_rebuild(state.sph_pos):
             old = nl.rebuild(state.sph_pos, state.sph_radius, state.sph_block)
             self.hist = carry_history(old, self.hist, nl.pairs, state.ns)
-            self.pair_f = np.zeros((len(nl.pairs), 3))
-            self.pair_x = np.zeros((len(nl.pairs), 3))
+            self._new_buffers()
         if len(nl.pairs) == 0:
             self.n_contacts = 0
-            return
+            return 0.0, 0.0, 0.0
         m = self.mat
-        es, dd, df, nc = pair_forces(nl.pairs, self.hist, state.sph_pos, state.sph_radius, state.sph_block,
-                                     state.sph_material, state.pos, state.vel, state.omega, state.mass,
-                                     state.fixed, m.k, m.kt, m.h, m.mu, self.clip, dt, self.pair_f, self.pair_x)
-        gather_pair_forces(state.blk_sph_start, state.pos, nl.sp_start, nl.sp_pair, nl.sp_sign,
-                           self.pair_f, self.pair_x, force, torque)
+        es, dd, df, nc = pair_forces(nl.pairs, self.hist, self.held, self.act, state.sph_pos, state.sph_radius,
+                                     state.sph_block, state.sph_material, state.pos, state.vel, state.omega,
+                                     state.mass, state.fixed, m.k, m.kt, m.h, m.mu, self.clip, dt,
+                                     self.pair_f, self.pair_x)
         self.n_contacts = nc
+        return es, dd, df
+
+    def add_forces(self, state, force, torque, ledger, dt):
+        nl = self.neighbours
+        es, dd, df = self.pair_stage(state, dt)
+        if len(nl.pairs) == 0:
+            return
+        gather_pair_forces(state.blk_sph_start, state.pos, nl.sp_start, nl.sp_pair, nl.sp_sign, self.act,
+                           self.pair_f, self.pair_x, force, torque)
         ledger[L_SPRING] += es
         ledger[L_DASHPOT] += dd
         ledger[L_FRICTION] += df
+
+    def _new_buffers(self):
+        n = len(self.neighbours.pairs)
+        self.held = history_held(self.hist)
+        self.act = np.zeros(n, np.uint8)
+        self.pair_f = np.zeros((n, 3))
+        self.pair_x = np.zeros((n, 3))
 
     def stiffness_bound(self):
         return float(self.mat.k.max()), float(self.mat.h.max())
@@ -669,8 +811,7 @@ class SphereContact:
         from .neighbours import sphere_pair_map
         ns = len(ref) if len(ref) else int(nl.pairs.max() + 1 if len(nl.pairs) else 0)
         nl.sp_start, nl.sp_pair, nl.sp_sign = sphere_pair_map(nl.pairs, ns)
-        self.pair_f = np.zeros((len(nl.pairs), 3))
-        self.pair_x = np.zeros((len(nl.pairs), 3))
+        self._new_buffers()
 
 
 class WallContact:
@@ -689,6 +830,7 @@ class WallContact:
         self.tri_mesh = np.asarray(tri_mesh, np.int64).reshape(-1)
         self.mesh_mat = np.asarray(mesh_mat, np.int64).reshape(-1)
         self.hist = np.zeros((ns, len(self.planes) + len(self.mesh_mat), HIST))
+        self.held = np.zeros(self.hist.shape[:2], np.uint8)     # 1 where hist may be non-zero
         nw = self.hist.shape[1]
         self.until = np.full(nw, np.inf) if until is None else np.asarray(until, np.float64).reshape(nw)
 
@@ -699,11 +841,19 @@ class WallContact:
         es, dd, df = wall_forces(state.blk_sph_start, state.sph_pos, state.sph_radius, state.sph_material,
                                  state.pos, state.vel, state.omega, state.mass, state.fixed,
                                  self.planes, self.plane_mat, self.tris, self.tri_mesh, self.mesh_mat,
-                                 len(self.mesh_mat), self.until > state.t, self.hist, m.k, m.kt, m.h, m.mu, self.clip, dt,
+                                 len(self.mesh_mat), self.until > state.t, self.hist, self.held,
+                                 m.k, m.kt, m.h, m.mu, self.clip, dt,
                                  force, torque)
         ledger[L_SPRING] += es
         ledger[L_DASHPOT] += dd
         ledger[L_FRICTION] += df
+
+    def material_table(self):
+        """Mixed (k, k_t, h, μ) per material pair (for the fused step)."""
+        if getattr(self, "_tab", None) is None:
+            m = self.mat
+            self._tab = material_table(m.k, m.kt, m.h, m.mu)
+        return self._tab
 
     def stiffness_bound(self):
         return float(self.mat.k.max()), float(self.mat.h.max())
@@ -713,6 +863,7 @@ class WallContact:
 
     def restore(self, arrays):
         self.hist = np.asarray(arrays["hist"], np.float64).reshape(self.hist.shape)
+        self.held = np.any(self.hist != 0.0, axis=2).astype(np.uint8)
 
 
 def wall_forces_ref(blk_sph_start, sph_pos, sph_radius, sph_material, sph_block, pos, vel, omega, mass,

@@ -27,32 +27,18 @@ from .bodies import rotate, rotate_inv
 
 
 @nb.njit(cache=True, inline="always")
-def _qmul_axis(q, k, half_angle):
-    """q ← q ⊗ (cos a, sin a e_k) in place."""
-    c = np.cos(half_angle)
-    s = np.sin(half_angle)
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    if k == 0:
-        q[0] = w * c - x * s
-        q[1] = x * c + w * s
-        q[2] = y * c + z * s
-        q[3] = z * c - y * s
-    elif k == 1:
-        q[0] = w * c - y * s
-        q[1] = x * c - z * s
-        q[2] = y * c + w * s
-        q[3] = z * c + x * s
-    else:
-        q[0] = w * c - z * s
-        q[1] = x * c + y * s
-        q[2] = y * c - x * s
-        q[3] = z * c + w * s
-
-
-@nb.njit(cache=True, inline="always")
-def _sub_rotation(q, L, inertia_b, k, tau):
-    lb = rotate_inv(q[0], q[1], q[2], q[3], L[0], L[1], L[2])
-    _qmul_axis(q, k, 0.5 * tau * lb[k] / inertia_b[k])
+def _cos_sin(a):
+    """(cos a, sin a). For |a| < 1/16 (every sub-rotation of a stable DEM step: a = ¼ ω Δt)
+    by their Taylor series to a¹⁰ and a⁹, whose truncation error (< 1e-19 relative) is far below
+    the rounding of the result, so they agree with the library functions to the last bit or
+    two at a fraction of the cost; the library functions otherwise."""
+    if abs(a) < 0.0625:
+        a2 = a * a
+        c = 1.0 + a2 * (-1.0 / 2.0 + a2 * (1.0 / 24.0 + a2 * (-1.0 / 720.0 + a2 * (1.0 / 40320.0
+                                                                                 - a2 / 3628800.0))))
+        s = a + a * a2 * (-1.0 / 6.0 + a2 * (1.0 / 120.0 + a2 * (-1.0 / 5040.0 + a2 / 362880.0)))
+        return c, s
+    return np.cos(a), np.sin(a)
 
 
 @nb.njit(cache=True, inline="always")
@@ -70,9 +56,74 @@ def kick(vel, angmom, mass, force, torque, fixed, dt):
     for b in nb.prange(vel.shape[0]):
         if fixed[b]:
             continue
-        for d in range(3):
-            vel[b, d] += dt * force[b, d] / mass[b]
-            angmom[b, d] += dt * torque[b, d]
+        _kick_block(b, vel, angmom, mass, force, torque, dt)
+
+
+@nb.njit(cache=True, inline="always")
+def _kick_block(b, vel, angmom, mass, force, torque, dt):
+    for d in range(3):
+        vel[b, d] += dt * force[b, d] / mass[b]
+        angmom[b, d] += dt * torque[b, d]
+
+
+@nb.njit(cache=True)
+def _sub_rotation_s(w, x, y, z, L0, L1, L2, I0, I1, I2, k, tau):
+    """One exact sub-rotation R_k(τ): q ← q ⊗ exp(½ τ (L_b,k / I_k) e_k) with L_b = R(q)ᵀ L, on
+    scalars; returns the new (w, x, y, z)."""
+    lb = rotate_inv(w, x, y, z, L0, L1, L2)
+    if k == 0:
+        a = 0.5 * tau * lb[0] / I0
+    elif k == 1:
+        a = 0.5 * tau * lb[1] / I1
+    else:
+        a = 0.5 * tau * lb[2] / I2
+    c, s = _cos_sin(a)
+    if k == 0:
+        return w * c - x * s, x * c + w * s, y * c + z * s, z * c - y * s
+    elif k == 1:
+        return w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s
+    return w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s
+
+
+@nb.njit(cache=True)
+def _rotor_drift(w, x, y, z, L0, L1, L2, I0, I1, I2, dt):
+    """The split free-rotor flow over dt on scalars (see module docstring): returns the new
+    unit quaternion and ω evaluated at the middle of the drift. Scalars only (a plain call
+    without array arguments costs nothing; Numba's IR inlining of the six nested sub-rotations
+    takes minutes to compile)."""
+    h = 0.5 * dt
+    w, x, y, z = _sub_rotation_s(w, x, y, z, L0, L1, L2, I0, I1, I2, 0, h)
+    w, x, y, z = _sub_rotation_s(w, x, y, z, L0, L1, L2, I0, I1, I2, 1, h)
+    w, x, y, z = _sub_rotation_s(w, x, y, z, L0, L1, L2, I0, I1, I2, 2, h)
+    lb = rotate_inv(w, x, y, z, L0, L1, L2)
+    om = rotate(w, x, y, z, lb[0] / I0, lb[1] / I1, lb[2] / I2)
+    w, x, y, z = _sub_rotation_s(w, x, y, z, L0, L1, L2, I0, I1, I2, 2, h)
+    w, x, y, z = _sub_rotation_s(w, x, y, z, L0, L1, L2, I0, I1, I2, 1, h)
+    w, x, y, z = _sub_rotation_s(w, x, y, z, L0, L1, L2, I0, I1, I2, 0, h)
+    n = np.sqrt(w * w + x * x + y * y + z * z)
+    return w / n, x / n, y / n, z / n, om[0], om[1], om[2]
+
+
+@nb.njit(cache=True, inline="always")
+def _drift_block(b, pos, quat, vel, angmom, omega, inertia, dt):
+    """Drift of free block b (see :func:`drift`)."""
+    for d in range(3):
+        pos[b, d] += dt * vel[b, d]
+    L0, L1, L2 = angmom[b, 0], angmom[b, 1], angmom[b, 2]
+    if L0 == 0.0 and L1 == 0.0 and L2 == 0.0:
+        omega[b, 0] = 0.0
+        omega[b, 1] = 0.0
+        omega[b, 2] = 0.0
+    else:
+        r = _rotor_drift(quat[b, 0], quat[b, 1], quat[b, 2], quat[b, 3], L0, L1, L2,
+                         inertia[b, 0], inertia[b, 1], inertia[b, 2], dt)
+        quat[b, 0] = r[0]
+        quat[b, 1] = r[1]
+        quat[b, 2] = r[2]
+        quat[b, 3] = r[3]
+        omega[b, 0] = r[4]
+        omega[b, 1] = r[5]
+        omega[b, 2] = r[6]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -81,26 +132,7 @@ def drift(pos, quat, vel, angmom, omega, inertia, fixed, dt):
     for b in nb.prange(pos.shape[0]):
         if fixed[b]:
             continue
-        for d in range(3):
-            pos[b, d] += dt * vel[b, d]
-        q = quat[b]
-        L = angmom[b]
-        I = inertia[b]
-        if L[0] == 0.0 and L[1] == 0.0 and L[2] == 0.0:
-            omega[b, 0] = 0.0
-            omega[b, 1] = 0.0
-            omega[b, 2] = 0.0
-            continue
-        _sub_rotation(q, L, I, 0, 0.5 * dt)
-        _sub_rotation(q, L, I, 1, 0.5 * dt)
-        _sub_rotation(q, L, I, 2, 0.5 * dt)
-        _omega_world(q, L, I, omega[b])
-        _sub_rotation(q, L, I, 2, 0.5 * dt)
-        _sub_rotation(q, L, I, 1, 0.5 * dt)
-        _sub_rotation(q, L, I, 0, 0.5 * dt)
-        n = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-        for i in range(4):
-            q[i] /= n
+        _drift_block(b, pos, quat, vel, angmom, omega, inertia, dt)
 
 
 @nb.njit(cache=True, parallel=True)

@@ -142,16 +142,26 @@ def sphere_pair_map(pairs, ns):
 
 @nb.njit(cache=True)
 def carry_history(old_pairs, old_hist, new_pairs, ns):
-    """Tangential history of pairs present in both lists is copied, new pairs start at 0."""
+    """Contact history of pairs present in both lists is copied, new pairs start at 0.
+    Both lists have rows sorted by (i, j): one merge pass, O(old + new); only non-zero old
+    rows are copied."""
     new_hist = np.zeros((new_pairs.shape[0], old_hist.shape[1]))
-    if old_pairs.shape[0] == 0:
-        return new_hist
-    okey = old_pairs[:, 0] * ns + old_pairs[:, 1]   # rows sorted by (i, j) → keys sorted
-    for p in range(new_pairs.shape[0]):
-        key = new_pairs[p, 0] * ns + new_pairs[p, 1]
-        k = np.searchsorted(okey, key)
-        if k < okey.shape[0] and okey[k] == key:
-            for d in range(old_hist.shape[1]):
+    m = old_hist.shape[1]
+    p = 0
+    npn = new_pairs.shape[0]
+    for k in range(old_pairs.shape[0]):
+        nz = False
+        for d in range(m):
+            if old_hist[k, d] != 0.0:
+                nz = True
+                break
+        if not nz:
+            continue
+        key = old_pairs[k, 0] * ns + old_pairs[k, 1]
+        while p < npn and new_pairs[p, 0] * ns + new_pairs[p, 1] < key:
+            p += 1
+        if p < npn and new_pairs[p, 0] * ns + new_pairs[p, 1] == key:
+            for d in range(m):
                 new_hist[p, d] = old_hist[k, d]
     return new_hist
 

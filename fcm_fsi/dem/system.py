@@ -8,6 +8,10 @@ One step n → n+1 (between steps ``sph_pos`` matches ``pos``/``quat``):
 2. ``kick``       v += Δt F/m, L += Δt T; control imposes velocity/displacement DOFs
 3. ``ledger``     energy bookkeeping (optional, every step when enabled)
 4. ``drift``      x += Δt v, q by the split free-rotor flow, ω refreshed; spheres moved
+
+Without controls and ledger and with only sphere–sphere contact and walls as interactions,
+the same step runs as two Numba kernels (``fused.py``: the pair kernel, then one pass over
+the blocks for the rest), with bit-identical results.
 """
 from __future__ import annotations
 
@@ -15,9 +19,12 @@ import math
 
 import numpy as np
 
-from . import LEDGER_SLOTS
+from . import L_DASHPOT, L_FRICTION, L_SPRING, LEDGER_SLOTS
+from .contact import HIST
 from .bodies import update_sphere_positions
+from .contact import SphereContact, WallContact
 from .control import Controls
+from .fused import advance_blocks
 from .integrate import drift, kick, omega_from_angmom
 from .ledger import Ledger
 from .state import DEMState
@@ -76,6 +83,7 @@ class DEMSystem:
         self._wm = np.zeros((state.nb, 3))
         self.vel_prev = state.vel.copy()        # v_{n−1/2} kept for the ledger
         self.angmom_prev = state.angmom.copy()
+        self.fuse = True                        # False: always the stage-by-stage step (tests)
 
     # ------------------------------------------------------------------ stages
     def compute_forces(self) -> None:
@@ -93,7 +101,52 @@ class DEMSystem:
         if self.controls is not None:
             self.controls.add_forces(f, t)
 
+    def _fusable(self):
+        """(sphere contact, walls or None) when the step can run fused (module docstring)."""
+        if not self.fuse or self.ledger is not None or self.controls is not None:
+            return None
+        its = self.interactions
+        if len(its) == 1 and type(its[0]) is SphereContact:
+            return its[0], None
+        if len(its) == 2 and type(its[0]) is SphereContact and type(its[1]) is WallContact:
+            return its[0], its[1]
+        return None
+
+    def _fused_step(self, contact: SphereContact, walls: WallContact | None) -> None:
+        st, dt, led = self.state, self.dt, self.led
+        led[:] = 0.0
+        es, dd, df = contact.pair_stage(st, dt)
+        led[L_SPRING] += es
+        led[L_DASHPOT] += dd
+        led[L_FRICTION] += df
+        nl = contact.neighbours
+        if walls is None or walls.hist.shape[1] == 0:
+            if getattr(self, "_nowall", None) is None or self._nowall[7].shape[0] != st.ns:
+                self._nowall = (np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros((0, 3, 3)), np.zeros(0, np.int64),
+                                np.zeros(0, np.int64), 0, np.zeros(0, np.bool_), np.zeros((st.ns, 0, HIST)),
+                                np.zeros((st.ns, 0), np.uint8), np.zeros((1, 1, 4)))
+            wargs = self._nowall
+            clip = contact.clip
+        else:
+            wargs = (walls.planes, walls.plane_mat, walls.tris, walls.tri_mesh, walls.mesh_mat, len(walls.mesh_mat),
+                     walls.until > st.t, walls.hist, walls.held, walls.material_table())
+            clip = walls.clip
+        es, dd, df = advance_blocks(st.blk_sph_start, st.sph_pos, st.sph_radius, st.sph_material, st.sph_local,
+                                    st.pos, st.quat, st.vel, st.omega, st.angmom, st.mass, st.inertia, st.fixed,
+                                    st.ext_force, st.ext_torque, self.gravity,
+                                    nl.sp_start, nl.sp_pair, nl.sp_sign, contact.act, contact.pair_f, contact.pair_x,
+                                    *wargs, clip, dt, self.force, self.torque)
+        led[L_SPRING] += es
+        led[L_DASHPOT] += dd
+        led[L_FRICTION] += df
+        st.t += dt
+        st.step += 1
+
     def step(self) -> None:
+        parts = self._fusable()
+        if parts is not None:
+            self._fused_step(*parts)
+            return
         st, dt = self.state, self.dt
         self.compute_forces()
         if self.ledger is not None:
