@@ -129,6 +129,7 @@ def test_block_resting_on_the_floor_stays_at_rest_with_the_gap_fill(tmp_path):
     case.write_text(yaml.safe_dump(resting_block_case(None)))
     run = run_cli([str(case), "--output", str(tmp_path / "fill")])
     assert run.returncode == 0, run.stderr[-2000:]
+    assert "lie exactly on a block surface" in run.stderr + run.stdout   # faces on the 1.25 cm mesh lines
     s = read(tmp_path / "fill" / "series.csv")
     assert s["t"][-1] == pytest.approx(0.04)
     speed = np.sqrt(s["b0_vx"] ** 2 + s["b0_vy"] ** 2)

@@ -145,3 +145,29 @@ def test_newton_and_picard_reach_the_same_solution():
         out[nl] = ns.U.x.array.copy()
     assert np.abs(out["newton"] - out["picard"]).max() < 1e-8
     assert its["newton"] < its["picard"]
+
+
+def test_line_search_turns_a_diverging_newton_solve_into_a_converging_one():
+    """Re-1000 cavity, one backward-Euler step of Δt = 100 from rest (the steady problem in one
+    step): the plain Newton iteration diverges (residual ~1e9 by iteration 11), the
+    backtracking line search (``fluid.line_search``) converges to rtol 1e-10; with Δt = 1,
+    where Newton converges, the line search never acts and the iterates are identical."""
+    tm = rectangle(MPI.COMM_WORLD, n=(16, 16))
+    bcs = (BoundaryCondition(boundary="top", kind="velocity", value=(1.0, 0.0)),
+           BoundaryCondition(boundary="left", kind="no_slip"), BoundaryCondition(boundary="right", kind="no_slip"),
+           BoundaryCondition(boundary="bottom", kind="no_slip"))
+
+    def solver(dt, line_search):
+        cfg = FluidConfig(density=1.0, viscosity=1e-3, boundaries=bcs, theta=1.0, startup_steps=0,
+                          line_search=line_search, max_iterations=30, rtol=1e-10, atol=1e-13)
+        return NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names)
+
+    with pytest.raises(NonlinearSolveError):
+        solver(100.0, 0).step()
+    ns = solver(100.0, 8)
+    info = ns.step()
+    assert info.residuals[-1] <= 1e-10 * info.residuals[0] and ns.backtracks > 0
+    plain, searched = solver(1.0, 0), solver(1.0, 8)
+    plain.step(), searched.step()
+    assert searched.backtracks == 0
+    assert np.array_equal(plain.U.x.array, searched.U.x.array)

@@ -1,6 +1,8 @@
 """Checkpoint/restart: 2N steps equal N steps + restart + N steps, on 1 and on 2 ranks."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import h5py
 import numpy as np
 import pytest
@@ -90,3 +92,33 @@ def test_single_phase_fluid_case_runs_and_restarts(tmp_path, root):
     b = np.genfromtxt(tmp_path / "half" / "series.csv", delimiter=",", skip_header=1)
     assert a.shape == b.shape == (3, 7)
     np.testing.assert_allclose(a[-1, :6], b[-1, :6], rtol=1e-10)
+
+
+def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path):
+    """A linear (or nonlinear) solve that fails inside a step reaches the user as
+    SimulationDiverged naming the step, the time and the last good checkpoint — the CLI's
+    'run stopped' message — not as a PETSc traceback."""
+    from mpi4py import MPI
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.fluid.solvers import LinearSolveError
+    from fcm_fsi.simulation.loop import SimulationDiverged, TimeLoop
+    root = Path(__file__).resolve().parents[1]
+    case = load_case(root / "cases" / "still_water.yaml", ["output.xdmf=false", "output.checkpoint=false"])
+
+    class FailingModel:
+        mesh, output_functions, series_units = None, [], {}
+
+        def diagnostics(self):
+            return {}
+
+        def stable_dt(self, cfl):
+            return float("inf")
+
+        def health(self, diag):
+            return None
+
+        def advance(self, t, dt, timer):
+            raise LinearSolveError("linear solve ns_ diverged at step 1 (t = 0.002 s): reason -11")
+
+    with pytest.raises(SimulationDiverged, match=r"step 1, t = 0 s .*reason -11; last good checkpoint: .*checkpoint.h5"):
+        TimeLoop(case, FailingModel(), tmp_path, MPI.COMM_WORLD, None).run()

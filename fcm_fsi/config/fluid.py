@@ -70,6 +70,9 @@ class FluidConfig:
                                       "by this factor (0 = recompute every iteration: the step solves the equations "
                                       "with τ(uⁿ⁺¹) exactly; e.g. 1e-3 stops Newton cycling when the switch of eq 10 "
                                       "flips, τ then lags the converged iterate slightly)", ge=0, lt=1)
+    line_search: int = param(4, doc="Newton/Picard globalisation: when a full update raises the residual norm, halve "
+                                    "the update up to this many times (0 = off); converging steps never trigger it",
+                             ge=0, le=20)
     max_iterations: int = param(25, doc="nonlinear iterations per step before the run stops with an error", ge=1)
     quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
     pressure_reference: tuple[float, ...] | None = param(

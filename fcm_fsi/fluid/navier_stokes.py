@@ -250,6 +250,7 @@ class NavierStokes:
         opts.update(petsc_options or {})
         self.ksp = solvers.make_ksp(self.comm, self.A, petsc_prefix, opts)
         self.history: list[StepInfo] = []
+        self.backtracks = 0   # line-search halvings over the run (``_backtrack``)
 
     # ------------------------------------------------------------------ forms
     def _parts(self) -> FormParts:
@@ -396,9 +397,14 @@ class NavierStokes:
         r0 = None
         for it in range(cfg.max_iterations + 1):
             t0 = time.perf_counter()
+            tau_before = None
             if r0 is None or info.residuals[-1] > cfg.tau_freeze * r0:
+                if it > 0 and cfg.line_search:
+                    tau_before = (self.tau_supg.x.array.copy(), self.tau_cont.x.array.copy())
                 self.update_tau()
             r = self._assemble_residual()
+            if it > 0:
+                r = self._backtrack(r, info.residuals[-1], tau_before)
             info.assembly_seconds += time.perf_counter() - t0
             info.residuals.append(r)
             if not np.isfinite(r):
@@ -423,6 +429,27 @@ class NavierStokes:
         raise NonlinearSolveError(self.step_count, self.t, info.residuals,
                                   f"no convergence in {cfg.max_iterations} {cfg.nonlinear} iterations "
                                   f"(rtol {cfg.rtol:g}, atol {cfg.atol:g})")
+
+    def _backtrack(self, r: float, r_prev: float, tau_before=None) -> float:
+        """Backtracking line search on the residual norm: when the full update U ← U − dU did
+        not lower ‖R‖, halve it (λ = ½, ¼, …, at most ``line_search`` times) until it does;
+        returns ‖R‖ at the accepted λ. The search runs on the residual whose Jacobian gave dU,
+        so τ goes back to its values before this iteration's update (``tau_before``), for
+        which dU is a descent direction. A full update that lowers ‖R‖ — every iteration of
+        a converging Newton solve — is accepted untouched, at no extra cost."""
+        if not self.config.line_search or (np.isfinite(r) and r < r_prev):
+            return r
+        if tau_before is not None:
+            self.tau_supg.x.array[:], self.tau_cont.x.array[:] = tau_before
+            r = self._assemble_residual()
+        lam, n = 1.0, 0
+        while (not np.isfinite(r) or r >= r_prev) and n < self.config.line_search:
+            lam *= 0.5
+            self.U.x.array[:] += lam * self.dU.x.array
+            r = self._assemble_residual()
+            n += 1
+        self.backtracks += n
+        return r
 
     def run_to_steady(self, tol: float, max_steps: int, growth: float = 1.0, dt_max: float = np.inf) -> int:
         """Pseudo-time march until max|u^{n+1} − uⁿ|/(Δt·max|u|) ≤ tol (1/s); returns steps taken.

@@ -143,7 +143,8 @@ class NodalNormal:
         self.n.x.array[:] = (g / norm[:, None]).ravel()
 
 
-def phase_field_residual(phi, w, phi_n, phi_k, normal, u, dt, gamma, eps, form: str, supg: bool, dx, ds):
+def phase_field_residual(phi, w, phi_n, phi_k, normal, u, dt, gamma, eps, form: str, supg: bool, dx, ds,
+                         advective=None):
     """Residual F(φ; w) of the Crank–Nicolson scheme, linear in the trial φ.
 
     The interface normal is the nodal (P1) normal of the extrapolated φ* = 3/2 φⁿ − 1/2 φⁿ⁻¹
@@ -151,6 +152,12 @@ def phase_field_residual(phi, w, phi_n, phi_k, normal, u, dt, gamma, eps, form: 
     (or the Allen–Cahn reaction f(φ) = φ(1−φ)(1−2φ)) is linearised by Newton at the
     iterate φ_k, g ≈ g(φ_k) + g'(φ_k)(φ − φ_k), and averaged with its value at φⁿ
     (Crank–Nicolson). Iterating to convergence gives the exact CN solution.
+
+    ``advective`` (DG0, 0 or 1 per cell): where it is 1 the transport is u·∇φ instead of
+    ∇·(φu) (the term −χ θ (∇·u) w is added). The coupled model sets it on the cells at and
+    inside the blocks, where the advecting field — the fluid's velocity outside, the rigid
+    motion inside — is not divergence-free: in divergence form its convergence there
+    compresses φ beyond 1 at the block surface.
     """
     theta = 0.5 * (phi + phi_n)
     mesh = w.ufl_function_space().mesh
@@ -161,6 +168,8 @@ def phase_field_residual(phi, w, phi_n, phi_k, normal, u, dt, gamma, eps, form: 
     F = w * (phi - phi_n) / dt * dx - theta * ufl.dot(u, ufl.grad(w)) * dx \
         + w * theta * outflow * ds \
         + gamma * eps * ufl.dot(ufl.grad(w), ufl.grad(theta)) * dx
+    if advective is not None:
+        F -= advective * theta * ufl.div(u) * w * dx
     if form == "conservative":
         g_new = phi_k * (1 - phi_k) + (1 - 2 * phi_k) * (phi - phi_k)
         flux = 0.5 * (g_new + phi_n * (1 - phi_n)) * normal
@@ -236,8 +245,10 @@ class PhaseField:
         dx = ufl.dx(metadata={"quadrature_degree": QUADRATURE_DEGREE[cfg.form]})
         ds = ufl.ds(metadata={"quadrature_degree": 2})
         trial, w = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
+        #: 1 on cells where φ is transported in advective form (see phase_field_residual)
+        self.advective_cells = fem.Function(fem.FunctionSpace(msh, ("DG", 0)), name="advective_cells")
         F = phase_field_residual(trial, w, self.phi_n, self.phi_k, self.normal.n, self.u, self.dt, gamma,
-                                 self.eps, cfg.form, cfg.supg, dx, ds)
+                                 self.eps, cfg.form, cfg.supg, dx, ds, self.advective_cells)
         self.a = fem.form(ufl.lhs(F))
         self.L = fem.form(ufl.rhs(F))
         self.mass_form = fem.form(self.phi * ufl.dx(metadata={"quadrature_degree": 2}))

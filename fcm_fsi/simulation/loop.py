@@ -21,6 +21,8 @@ from ..io.csv import TimeSeriesCSV
 from ..io.fields import FieldWriter
 from ..io.logging import get_logger
 from ..io.timing import StageTimer
+from ..fluid.navier_stokes import NonlinearSolveError
+from ..fluid.solvers import LinearSolveError
 
 log = get_logger("run")
 
@@ -106,7 +108,12 @@ class TimeLoop:
         dt = run.dt
         while self.t < run.t_end * (1 - 1e-12):
             dt = next_dt(self.case, self.model, self.t)
-            self.model.advance(self.t, dt, self.timer)
+            try:
+                self.model.advance(self.t, dt, self.timer)
+            except (SimulationDiverged, LinearSolveError, NonlinearSolveError, FloatingPointError) as err:
+                raise SimulationDiverged(f"step {self.step + 1}, t = {self.t:.6g} s → {self.t + dt:.6g} s: "
+                                         f"{str(err).split('; last good checkpoint')[0]}; "
+                                         f"last good checkpoint: {self.out / 'checkpoint.h5'}") from err
             self.step += 1
             self.t += dt
             with self.timer("diagnostics"):
