@@ -135,6 +135,7 @@ class CutDomain:
         self.level_dofs = self.node_map(self.S1)
         self.wall_dofs = self.node_map(self.V1)
         self.cell_owner = np.full(ncells, -2, np.int64)
+        self.body_cells = np.zeros(ncells, bool)
         self.fluid_measure = np.zeros(ncells)
         self.surface_measure = np.zeros(ncells)
         self.h = cell_size(mesh)
@@ -177,7 +178,9 @@ class CutDomain:
             self.wall_velocity.x.array[bs * self.wall_dofs + d] = wall_velocity[:, d]
         # a cell belongs to the body owning its deepest vertex
         deepest = np.argmin(values, axis=1)
-        self.cell_owner = owner[self.geom_cells[np.arange(len(values)), deepest]]
+        rows = np.arange(len(values))
+        self.cell_owner = owner[self.geom_cells[rows, deepest]]
+        self.body_cells = values[rows, deepest] <= 0     # cells at (cut or touching Γ) or inside a body
         return self.statistics(values)
 
     def statistics(self, values: np.ndarray) -> CutStatistics:

@@ -110,9 +110,12 @@ class CoupledModel:
         nv = self.ns.V.dofmap.index_map.size_local + self.ns.V.dofmap.index_map.num_ghosts
         self.v_fluid = np.ones(nv, bool)
         self.v_rigid = np.zeros((nv, self.gdim))
+        self._advective_dofs = None   # DG0 dof of each cell of the phase field's advective_cells
         if case.phase_field is not None:
             self.fluid.advection_filter = self.rigid_inside
             self.fluid.cell_density = self.fluid_part_density
+            dofmap = self.fluid.pf.advective_cells.function_space.dofmap
+            self._advective_dofs = dofmap.list.array.reshape(len(self.cut.geom_cells), -1)[:, 0]
 
         self._wall_form = None
         self.force = np.zeros((self.nb, 3))
@@ -228,7 +231,8 @@ class CoupledModel:
         x = self.points[:, : self.gdim]
         tol = 1e-9 * self.h_min
         interior = np.all((x > lo + tol) & (x < hi - tol), axis=1)
-        count = self.comm.allreduce(int(np.count_nonzero(interior & (np.abs(self.level) <= tol))), op=MPI.SUM)
+        level = self.cut.level_set.x.array[self.cut.level_dofs]     # at self.points, as last built
+        count = self.comm.allreduce(int(np.count_nonzero(interior & (np.abs(level) <= tol))), op=MPI.SUM)
         if count:
             log.warning("%d mesh vertices lie exactly on a block surface (faces on mesh lines): where the free "
                         "surface runs along such a face the fluid solve is known to fail (docs/coupling.md); "
@@ -240,7 +244,6 @@ class CoupledModel:
         unknown of :meth:`_block_velocities`)."""
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
-        self.level = level
         if velocities is None:
             ubar = self.dem.rigid_velocity(self.points, owner)[:, : self.gdim]
         else:
@@ -252,12 +255,9 @@ class CoupledModel:
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         stats = self.cut.update(level, owner, ubar)
-        if hasattr(self.fluid, "pf"):
-            # φ in advective form on the cells at and inside the blocks (PhaseField docstring)
-            chi = self.fluid.pf.advective_cells
-            if not hasattr(self, "_chi_dofs"):
-                self._chi_dofs = chi.function_space.dofmap.list.array.reshape(len(self.cut.geom_cells), -1)[:, 0]
-            chi.x.array[self._chi_dofs] = (level[self.cut.geom_cells] <= 0).any(axis=1)
+        if self._advective_dofs is not None:
+            # φ in advective form on the cells at and inside the blocks (phase_field_residual)
+            self.fluid.pf.advective_cells.x.array[self._advective_dofs] = self.cut.body_cells
         return stats
 
     def fluid_part_density(self, rho, rho_cell) -> None:

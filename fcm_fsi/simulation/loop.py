@@ -112,7 +112,7 @@ class TimeLoop:
                 self.model.advance(self.t, dt, self.timer)
             except (SimulationDiverged, LinearSolveError, NonlinearSolveError, FloatingPointError) as err:
                 raise SimulationDiverged(f"step {self.step + 1}, t = {self.t:.6g} s → {self.t + dt:.6g} s: "
-                                         f"{str(err).split('; last good checkpoint')[0]}; "
+                                         f"{err}; "
                                          f"last good checkpoint: {self.out / 'checkpoint.h5'}") from err
             self.step += 1
             self.t += dt
