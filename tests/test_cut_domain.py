@@ -382,3 +382,22 @@ def test_disc_sweep_with_vanishing_cut_fractions_converges(capsys):
               f"{int((fractions < 1e-6).sum())} positions below 1e-6")
     assert (fractions < 1e-6).sum() >= 6 and fractions.min() < 1e-14
     assert krylov.max() <= 2 * no_body, (krylov.max(), no_body)
+
+
+def test_fluid_at_rest_around_a_submerged_box_is_a_discrete_solution():
+    """Hydrostatic pressure and u = 0 solve the cut equations exactly (pressure wall with the
+    (1 − α) consistency weight), and the box feels (1 − α) ρ g V of its cut volume."""
+    from fcm_fsi.verify.cases.cut_moving import submerged_box_run
+    r = submerged_box_run(MPI.COMM_WORLD, 2, 24, t_end=0.1)
+    assert r["umax"] < 1e-9
+    assert abs(r["F_up"] / ((1 - 1e-3) * r["rho_g_V_cut"]) - 1) < 1e-9
+
+
+def test_moving_and_submerged_cases_quick_level(tmp_path):
+    """moving_cylinder (Galilean check) and submerged_box at their quick levels."""
+    cases = load_all()
+    for name in ("moving_cylinder", "submerged_box"):
+        metrics = cases[name].run("quick", tmp_path, MPI.COMM_WORLD)
+        bad = [m for m in metrics if not m.passed]
+        assert not bad, f"{name}: {bad}"
+    assert (tmp_path / "moving_cylinder_galilean.png").exists()

@@ -1,6 +1,6 @@
 """Benchmark (not a test): cost of one stabilized Navier–Stokes nonlinear iteration in 3D.
 
-    python -m fcm_fsi.bench navier_stokes --sizes 16 24 32 [--solver ilu|asm|hypre|lu]
+    python -m fcm_fsi.bench navier_stokes --sizes 16 24 32 [--solver schur|ilu|asm|hypre|lu]
     mpirun -n 2 python -m fcm_fsi.bench navier_stokes --sizes 16 24 32
 
 Case: channel flow in the unit cube on an n×n×n structured tetrahedral mesh (6n³ cells),
@@ -33,6 +33,7 @@ SOLVERS = {
     "hypre": {"ksp_type": "gmres", "ksp_gmres_restart": 100, "ksp_rtol": 1e-6, "ksp_max_it": 1000,
               "pc_type": "hypre", "pc_hypre_type": "boomeramg"},
     "lu": solvers.DIRECT_LU,
+    "schur": solvers.SCHUR_AMG,
 }
 
 
@@ -109,7 +110,7 @@ def run(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m fcm_fsi.bench.navier_stokes", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[24, 36, 48])
-    ap.add_argument("--solver", choices=sorted(SOLVERS), default="ilu")
+    ap.add_argument("--solver", choices=sorted(SOLVERS), default="schur")
     args = ap.parse_args(argv)
     comm = MPI.COMM_WORLD
     rows = []

@@ -8,11 +8,6 @@ from .fields import param
 from .loader import ConfigError
 
 
-def _default_petsc() -> dict:
-    """Direct LU (MUMPS) for the monolithic system: the default for small 2D cases."""
-    return {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
-
-
 @dataclass(frozen=True, kw_only=True)
 class BoundaryCondition:
     """One boundary condition on the mesh boundary called ``boundary``.
@@ -77,9 +72,11 @@ class FluidConfig:
     quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
     pressure_reference: tuple[float, ...] | None = param(
         None, unit="m", doc="point where p = 0 is pinned when no boundary is do_nothing (default: mesh lower corner)")
-    petsc: dict[str, str | int | float | bool] = param(default_factory=_default_petsc,
-                        doc="PETSc options of the monolithic (u, p) solve, prefix ns_; e.g. "
-                            "{ksp_type: gmres, pc_type: asm, sub_pc_type: ilu} for large 3D runs")
+    petsc: dict[str, str | int | float | bool] = param(
+        default_factory=dict,
+        doc="PETSc options of the monolithic (u, p) solve, prefix ns_; empty = automatic: MUMPS LU in 2D, "
+            "in 3D FGMRES + Schur field split with BoomerAMG on the velocity and pressure blocks "
+            "(fcm_fsi.fluid.solvers.SCHUR_AMG; blocks addressed as fieldsplit_u_*, fieldsplit_p_*)")
 
     def __post_init__(self) -> None:
         names = [bc.boundary for bc in self.boundaries]

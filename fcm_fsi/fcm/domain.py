@@ -209,12 +209,19 @@ class CutDomain:
 
     def wall_traction(self, parts):
         """Traction the wall exerts on the fluid per unit area, t_w, so that the body feels −t_w:
-        penalty: −p̄(u − ū); pressure: −p n − p̄(u − ū); nitsche: σ(u_θ, p)n − p̄(u − ū)."""
+        penalty: −p̄(u − ū); pressure: −(1 − α) p n − p̄(u − ū); nitsche: (1 − α) σ(u_θ, p)n − p̄(u − ū).
+
+        Why (1 − α): the Galerkin terms integrated by parts leave −∫_Γ σn·w from the fluid side
+        (weight 1) and +α ∫_Γ σn·w from the fictitious side (weight α), i.e. −(1 − α) ∫_Γ σn·w;
+        the consistency term must cancel exactly that, or a fluid at rest under gravity is not
+        a discrete solution (a leak of order α p/p̄ through Γ, and a buoyancy off by α).
+        """
         t = -self._pbar * (parts.u - self.wall_velocity)
+        keep = 1.0 - self.alpha
         if self.wall != "penalty":
-            t = t - parts.p * self.wall_normal()
+            t = t - keep * parts.p * self.wall_normal()
         if self.wall == "nitsche":
-            t = t + 2 * parts.mu * ufl.dot(ufl.sym(ufl.grad(parts.u_theta)), self.wall_normal())
+            t = t + keep * 2 * parts.mu * ufl.dot(ufl.sym(ufl.grad(parts.u_theta)), self.wall_normal())
         return t
 
     def extension_traction(self, parts):
@@ -240,7 +247,7 @@ class CutDomain:
                 adj = parts.q * self.wall_normal()
                 if self.wall == "nitsche":
                     adj = adj + 2 * parts.mu * ufl.dot(ufl.sym(ufl.grad(parts.w)), self.wall_normal())
-                F = F - ufl.inner(adj, parts.u - self.wall_velocity) * self.dGamma
+                F = F - (1.0 - self.alpha) * ufl.inner(adj, parts.u - self.wall_velocity) * self.dGamma
             return F
         return term
 

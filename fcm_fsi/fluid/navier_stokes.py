@@ -246,11 +246,23 @@ class NavierStokes:
         self.A = fem.petsc.create_matrix(self.J_form)
         self.b = fem.petsc.create_vector(self.F_form)
         self.dU = fem.Function(self.W)
-        opts = dict(config.petsc)
+        opts = dict(config.petsc) or dict(solvers.DIRECT_LU if gdim == 2 else solvers.SCHUR_AMG)
         opts.update(petsc_options or {})
-        self.ksp = solvers.make_ksp(self.comm, self.A, petsc_prefix, opts)
+        self.ksp = solvers.make_ksp(self.comm, self.A, petsc_prefix, opts, fields=self.field_index_sets())
         self.history: list[StepInfo] = []
         self.backtracks = 0   # line-search halvings over the run (``_backtrack``)
+
+    def field_index_sets(self) -> dict[str, PETSc.IS]:
+        """Owned global rows of velocity ("u") and pressure ("p") in the monolithic system, for
+        ``pc_type: fieldsplit`` (options ``fieldsplit_u_*``, ``fieldsplit_p_*``)."""
+        imap = self.W.dofmap.index_map
+        n_owned, first = imap.size_local, imap.local_range[0]
+        sets = {}
+        for name, dofs in (("u", self.V_map), ("p", self.Q_map)):
+            dofs = np.asarray(dofs, dtype=np.int64)
+            owned = np.sort(dofs[dofs < n_owned]) + first
+            sets[name] = PETSc.IS().createGeneral(owned.astype(PETSc.IntType), comm=self.comm)
+        return sets
 
     # ------------------------------------------------------------------ forms
     def _parts(self) -> FormParts:

@@ -69,10 +69,16 @@ def box(comm, lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), n=(8, 8, 8)) -> Tagg
 
 
 def _classify_and_mesh(gmsh, dim: int, length: float, height: float, center, radius: float,
-                       h_cyl: float, h_far: float, axis: int | None = None) -> None:
+                       h_cyl: float, h_far: float, axis: int | None = None,
+                       band: tuple[float, float] | None = None) -> None:
     """Physical groups (fluid, inlet, outlet, walls, cylinder) and a size field graded with
     the distance from the cylinder surface (or, unfitted, from its axis: ``axis`` is the
-    axis curve in 3D; in 2D the centre point is used)."""
+    axis curve in 3D; in 2D the centre point is used).
+
+    ``band = (d0, d1)``: instead, size h_cyl within d0 of the cylinder surface |ρ − r| (on
+    both sides of it when the mesh is unfitted), growing linearly to h_far at d1 — a thin
+    shell of fine cells where the wall pressure and shear live, at a fraction of the cells.
+    """
     vols = gmsh.model.getEntities(dim)
     gmsh.model.addPhysicalGroup(dim, [v[1] for v in vols], 1)
     groups = {k: [] for k in CHANNEL_NAMES}
@@ -91,25 +97,33 @@ def _classify_and_mesh(gmsh, dim: int, length: float, height: float, center, rad
         if tags:
             gmsh.model.addPhysicalGroup(dim - 1, tags, CHANNEL_NAMES[name])
             gmsh.model.setPhysicalName(dim - 1, CHANNEL_NAMES[name], name)
-    dist = gmsh.model.mesh.field.add("Distance")
-    if fitted:
-        gmsh.model.mesh.field.setNumbers(dist, "SurfacesList" if dim == 3 else "CurvesList", groups["cylinder"])
-        if dim == 2:
-            gmsh.model.mesh.field.setNumber(dist, "NumPointsPerCurve", 200)
-    elif dim == 2:
-        centre = gmsh.model.occ.addPoint(center[0], center[1], 0.0)
-        gmsh.model.occ.synchronize()
-        gmsh.model.mesh.field.setNumbers(dist, "PointsList", [centre])
+    if band is not None:
+        dist = gmsh.model.mesh.field.add("MathEval")
+        gmsh.model.mesh.field.setString(
+            dist, "F", f"Abs(Sqrt((x - {center[0]})^2 + (y - {center[1]})^2) - {radius})")
+        d0, d1 = band
     else:
-        gmsh.model.mesh.field.setNumbers(dist, "CurvesList", [axis])
-        gmsh.model.mesh.field.setNumber(dist, "NumPointsPerCurve", 100)
-    d0 = 0.5 * radius if fitted else 1.5 * radius      # from the axis: the whole cut region is fine
+        dist = gmsh.model.mesh.field.add("Distance")
+        d0 = 0.5 * radius if fitted else 1.5 * radius      # from the axis: the whole cut region is fine
+        d1 = 0.5 * height + (3 * radius if fitted else d0 + 2 * radius)
+        if fitted:
+            gmsh.model.mesh.field.setNumbers(dist, "SurfacesList" if dim == 3 else "CurvesList",
+                                             groups["cylinder"])
+            if dim == 2:
+                gmsh.model.mesh.field.setNumber(dist, "NumPointsPerCurve", 200)
+        elif dim == 2:
+            centre = gmsh.model.occ.addPoint(center[0], center[1], 0.0)
+            gmsh.model.occ.synchronize()
+            gmsh.model.mesh.field.setNumbers(dist, "PointsList", [centre])
+        else:
+            gmsh.model.mesh.field.setNumbers(dist, "CurvesList", [axis])
+            gmsh.model.mesh.field.setNumber(dist, "NumPointsPerCurve", 100)
     thr = gmsh.model.mesh.field.add("Threshold")
     gmsh.model.mesh.field.setNumber(thr, "InField", dist)
     gmsh.model.mesh.field.setNumber(thr, "SizeMin", h_cyl)
     gmsh.model.mesh.field.setNumber(thr, "SizeMax", h_far)
     gmsh.model.mesh.field.setNumber(thr, "DistMin", d0)
-    gmsh.model.mesh.field.setNumber(thr, "DistMax", 0.5 * height + (3 * radius if fitted else d0 + 2 * radius))
+    gmsh.model.mesh.field.setNumber(thr, "DistMax", d1)
     gmsh.model.mesh.field.setAsBackgroundMesh(thr)
     gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
     gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
@@ -156,28 +170,34 @@ def channel_2d(comm, h_cyl: float = 0.005, h_far: float = 0.03) -> TaggedMesh:
     return _build_or_load(comm, key, 2, build)
 
 
-def channel_3d(comm, h_cyl: float = 0.01, h_far: float = 0.05) -> TaggedMesh:
-    """Schäfer–Turek 3D-1Z geometry (square channel, z-aligned cylinder)."""
+def channel_3d(comm, h_cyl: float = 0.01, h_far: float = 0.05,
+               band: tuple[float, float] | None = None) -> TaggedMesh:
+    """Schäfer–Turek 3D-1Z geometry (square channel, z-aligned cylinder); ``band`` as in
+    ``_classify_and_mesh``."""
     L, H, c, r = 2.5, 0.41, (0.5, 0.2), 0.05
-    key = "st3d_" + hashlib.sha1(f"{L},{H},{c},{r},{h_cyl},{h_far},v1".encode()).hexdigest()[:10]
+    key = "st3d_" + hashlib.sha1(f"{L},{H},{c},{r},{h_cyl},{h_far},v1".encode()
+                                 + (f",band{band}".encode() if band else b"")).hexdigest()[:10]
 
     def build(gmsh):
         bx = gmsh.model.occ.addBox(0, 0, 0, L, H, H)
         cyl = gmsh.model.occ.addCylinder(c[0], c[1], 0, 0, 0, H, r)
         gmsh.model.occ.cut([(3, bx)], [(3, cyl)])
         gmsh.model.occ.synchronize()
-        _classify_and_mesh(gmsh, 3, L, H, c, r, h_cyl, h_far)
+        _classify_and_mesh(gmsh, 3, L, H, c, r, h_cyl, h_far, band=band)
     return _build_or_load(comm, key, 3, build)
 
 
-def channel_unfitted(comm, dim: int, h_cyl: float, h_far: float) -> TaggedMesh:
+def channel_unfitted(comm, dim: int, h_cyl: float, h_far: float,
+                     band: tuple[float, float] | None = None) -> TaggedMesh:
     """Schäfer–Turek channel (2D [0, 2.2] × [0, 0.41]; 3D [0, 2.5] × [0, 0.41]²) with no
-    hole: cells of size h_cyl within 1.5 radii of the cylinder axis, growing to h_far.
+    hole: cells of size h_cyl within 1.5 radii of the cylinder axis, growing to h_far (or,
+    with ``band``, in a shell around the cylinder surface; the mesh stays unfitted).
     Boundaries ``inlet outlet walls``."""
     L = 2.2 if dim == 2 else 2.5
     H, r = 0.41, 0.05
     c = (0.2, 0.2) if dim == 2 else (0.5, 0.2)
-    key = f"st{dim}d_unfitted_" + hashlib.sha1(f"{L},{H},{c},{r},{h_cyl},{h_far},v1".encode()).hexdigest()[:10]
+    key = f"st{dim}d_unfitted_" + hashlib.sha1(f"{L},{H},{c},{r},{h_cyl},{h_far},v1".encode()
+                                               + (f",band{band}".encode() if band else b"")).hexdigest()[:10]
 
     def build(gmsh):
         if dim == 2:
@@ -189,5 +209,5 @@ def channel_unfitted(comm, dim: int, h_cyl: float, h_far: float) -> TaggedMesh:
                                       gmsh.model.occ.addPoint(c[0], c[1], H if dim == 3 else 0.0)) \
             if dim == 3 else None
         gmsh.model.occ.synchronize()
-        _classify_and_mesh(gmsh, dim, L, H, c, r, h_cyl, h_far, axis=axis)
+        _classify_and_mesh(gmsh, dim, L, H, c, r, h_cyl, h_far, axis=axis, band=band)
     return _build_or_load(comm, key, dim, build)

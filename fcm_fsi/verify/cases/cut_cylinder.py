@@ -56,13 +56,14 @@ def cylinder_level_set(nodes: np.ndarray, dim: int, cutoff: float):
 
 
 def cut_cylinder_solution(comm, dim: int, h_cyl: float, h_far: float, gamma: float = GAMMA,
-                          alpha: float = ALPHA, petsc: dict | None = None, wall: str | None = None) -> dict:
-    """Steady Re-20 flow past the cut cylinder on ``channel_unfitted(comm, dim, h_cyl, h_far)``.
+                          alpha: float = ALPHA, petsc: dict | None = None, wall: str | None = None,
+                          band: tuple[float, float] | None = None) -> dict:
+    """Steady Re-20 flow past the cut cylinder on ``channel_unfitted(comm, dim, h_cyl, h_far, band)``.
 
     ``wall``: the CutDomain wall term (None: its default). Returns a dict with c_D, c_L, dp,
     cells (global), cut_cells, min_cut_fraction, area_error (relative error of the fitted
     fluid measure against the exact one) and steps (pseudo-time steps)."""
-    tm = channel.channel_unfitted(comm, dim, h_cyl, h_far)
+    tm = channel.channel_unfitted(comm, dim, h_cyl, h_far, band=band)
     msh = tm.mesh
     cut = CutDomain(msh, alpha=alpha, penalty=gamma, **({} if wall is None else {"wall": wall}))
     cutoff = max(0.025, 4 * h_cyl)
@@ -146,7 +147,11 @@ def cylinder_2d1_cut(level, out_dir: Path, comm) -> list[Metric]:
 
 
 # ------------------------------------------------------------------------ 3D-1Z
-CUT_3D_LEVELS = {"quick": [(0.02, 0.06)], "full": [(0.02, 0.06), (0.015, 0.045), (0.01, 0.03)]}
+# (h_cyl, h_far, band): quick, one mesh fine within 1.5 radii of the axis; full, three meshes with
+# a shell of fine cells on both sides of the (unfitted) cylinder surface, |ρ − r| ≤ 2 h_cyl,
+# growing to h_far at 0.15 m (mesh.channel.channel_unfitted)
+CUT_3D_LEVELS = {"quick": [(0.02, 0.06, None)],
+                 "full": [(h, 0.0225, (2 * h, 0.15)) for h in (0.01, 0.0075, 0.005)]}
 
 
 @register("cylinder_3d1z_cut", "Schäfer–Turek 3D-1Z on an unfitted mesh (finite-cover cut, pressure wall): "
@@ -154,9 +159,9 @@ CUT_3D_LEVELS = {"quick": [(0.02, 0.06)], "full": [(0.02, 0.06), (0.015, 0.045),
 def cylinder_3d1z_cut(level, out_dir: Path, comm) -> list[Metric]:
     from ...fluid.solvers import ITERATIVE_3D
     rows, last = [], None
-    for h_cyl, h_far in CUT_3D_LEVELS[level]:
+    for h_cyl, h_far, band in CUT_3D_LEVELS[level]:
         t0 = time.perf_counter()
-        last = cut_cylinder_solution(comm, 3, h_cyl, h_far, petsc=ITERATIVE_3D)
+        last = cut_cylinder_solution(comm, 3, h_cyl, h_far, petsc=ITERATIVE_3D, band=band)
         rows.append(_row(h_cyl, last, time.perf_counter() - t0))
         log.info("3D-1Z cut h_cyl %g: c_D %.5f c_L %.5f dp %.5f cells %d (%.1f s)", *rows[-1])
     if comm.rank == 0:
