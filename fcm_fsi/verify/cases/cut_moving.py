@@ -204,10 +204,16 @@ def submerged_box(level, out_dir: Path, comm) -> list[Metric]:
         rows.append((dim, n, r))
         log.info("submerged_box %dD n %d: F_up %.6g, ρgV %.6g (cut volume %.6g), max|u| %.3e, %d cells, %.1f s",
                  dim, n, r["F_up"], r["rho_g_V"], r["rho_g_V_cut"], r["umax"], r["cells"], r["wall"])
-    finest_2d = max(n for d, n, _ in rows if d == 2)
+    finest = {d: max(n for dd, n, _ in rows if dd == d) for d, _, _ in rows}
     for dim, n, r in rows:
-        tag = "" if (dim, n) == (2, finest_2d) else f"_{dim}d_n{n}"     # plain keys: the finest 2D mesh
-        metrics += [rel_error_metric("buoyancy_rel_error" + tag, r["F_up"], r["rho_g_V"], 0.005),
+        tag = "" if (dim, n) == (2, finest[2]) else f"_{dim}d_n{n}"     # plain keys: the finest 2D mesh
+        # the target applies to the finest mesh of each dimension; coarser rows show the convergence
+        # of the cut volume (the P1 level set rounds the box's corners and, in 3D, its edges)
+        buoyancy = (rel_error_metric("buoyancy_rel_error" + tag, r["F_up"], r["rho_g_V"], 0.005)
+                    if n == finest[dim] else
+                    report_only("buoyancy_rel_error" + tag, r["F_up"] / r["rho_g_V"] - 1, reference=0.0,
+                                note="coarser mesh: convergence, no target"))
+        metrics += [buoyancy,
                     at_most("spurious_velocity" + tag, r["umax"], 1e-4, unit="m/s"),
                     report_only("buoyancy_vs_cut_volume" + tag, r["F_up"] / r["rho_g_V_cut"] - 1,
                                 note="against ρ g times the discrete (piecewise-planar) cut volume"),
