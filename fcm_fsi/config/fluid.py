@@ -70,6 +70,12 @@ class FluidConfig:
                              ge=0, le=20)
     max_iterations: int = param(25, doc="nonlinear iterations per step before the run stops with an error", ge=1)
     quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
+    well_balanced: bool | None = param(
+        None, doc="two-phase runs: carry the gradient part of ρ f as a P2 static pressure Π, p = p' + Π "
+                  "(fluid/hydrostatic.py), so that a layered fluid at rest is an exact discrete solution; "
+                  "costs one P2 Poisson solve per step. null = automatic: on without blocks, off in coupled "
+                  "runs (not yet validated with the cut domain, docs/two-phase.md); false = the plain P1 "
+                  "pressure (spurious currents at the density jump)")
     pressure_reference: tuple[float, ...] | None = param(
         None, unit="m", doc="point where p = 0 is pinned when no boundary is do_nothing (default: mesh lower corner)")
     petsc: dict[str, str | int | float | bool] = param(

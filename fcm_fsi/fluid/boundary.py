@@ -66,6 +66,8 @@ class BCSet:
     bcs: list = field(default_factory=list)
     updaters: list = field(default_factory=list)
     pinned_pressure: bool = False
+    pinned_point: np.ndarray | None = None     # coordinates of the pinned pressure node
+    natural_facets: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))  # owned, local
 
     def update(self, t: float) -> None:
         for upd in self.updaters:
@@ -136,6 +138,7 @@ def _pin_pressure(ns, point, bcset: BCSet) -> None:
     zero = fem.Function(ns.Q)
     bcset.bcs.append(fem.dirichletbc(zero, dofs, ns.W.sub(1)))
     bcset.pinned_pressure = True
+    bcset.pinned_point = np.asarray(target[:gdim], dtype=float)
 
 
 def build_bcs(ns, configs, custom: dict | None = None) -> BCSet:
@@ -163,8 +166,8 @@ def build_bcs(ns, configs, custom: dict | None = None) -> BCSet:
     essential += [ns.boundary_facets(name) for name in custom]
     covered = np.unique(np.concatenate(essential)) if essential else np.array([], dtype=np.int32)
     nown = mesh.topology.index_map(fdim).size_local
-    natural = np.setdiff1d(ext[ext < nown], covered).size
-    if ns.comm.allreduce(natural, op=MPI.SUM) == 0:
+    bcset.natural_facets = np.setdiff1d(ext[ext < nown], covered).astype(np.int32)
+    if ns.comm.allreduce(bcset.natural_facets.size, op=MPI.SUM) == 0:
         ref = ns.config.pressure_reference
         if ref is None:
             x = mesh.geometry.x[:, : mesh.geometry.dim]

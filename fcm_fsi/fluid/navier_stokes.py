@@ -47,7 +47,7 @@ class FormParts:
     """The symbols a term needs: trial state, previous state, tests, properties, measure."""
 
     u: ufl.core.expr.Expr          # velocity at t^{n+1}
-    p: ufl.core.expr.Expr          # pressure (at t^{n+1}, acts as p^{n+θ})
+    p: ufl.core.expr.Expr          # pressure (at t^{n+1}, acts as p^{n+θ}); p' + Π with a static part
     u_n: ufl.core.expr.Expr        # velocity at t^n
     u_theta: ufl.core.expr.Expr    # θ u + (1 − θ) uⁿ
     a: ufl.core.expr.Expr          # advecting velocity
@@ -178,6 +178,8 @@ class NavierStokes:
     pspg_density: density in the PSPG test function ∇q/ρ (default ``rho``). With a density
         jump inside a cell (two-phase), a cell-wise mean ρ keeps the PSPG term from weighting
         the pressure residual by 1/ρ_gas on the gas side of interface cells.
+    static_pressure: a known pressure field Π (e.g. the P2 hydrostatic part of
+        :mod:`.hydrostatic`); the unknown is then p' and every term uses p' + Π.
     """
 
     def __init__(self, mesh, config: FluidConfig, dt: float, *, facet_tags=None,
@@ -185,7 +187,7 @@ class NavierStokes:
                  dx: ufl.Measure | None = None, extra_terms: Sequence[ExtraTerm] = (),
                  extra_bcs: Sequence[fem.DirichletBC] = (),
                  velocity_functions: dict[str, Callable] | None = None, petsc_prefix: str = "ns_",
-                 petsc_options: dict | None = None, pspg_density=None) -> None:
+                 petsc_options: dict | None = None, pspg_density=None, static_pressure=None) -> None:
         self.mesh, self.config, self.comm = mesh, config, mesh.comm
         cell = mesh.ufl_cell()
         gdim = mesh.geometry.dim
@@ -203,6 +205,7 @@ class NavierStokes:
         self.facet_tags, self.boundary_names = facet_tags, dict(boundary_names or {})
         self.rho = rho if rho is not None else fem.Constant(mesh, PETSc.ScalarType(config.density))
         self.rho_pspg = pspg_density
+        self.static_pressure = static_pressure
         self.mu = mu if mu is not None else fem.Constant(mesh, PETSc.ScalarType(config.viscosity))
         g = tuple(config.gravity) + (0.0,) * max(0, gdim - len(config.gravity))
         self.f = fem.Constant(mesh, np.asarray(g[:gdim], dtype=PETSc.ScalarType))
@@ -267,6 +270,8 @@ class NavierStokes:
     # ------------------------------------------------------------------ forms
     def _parts(self) -> FormParts:
         u, p = ufl.split(self.U)
+        if self.static_pressure is not None:
+            p = p + self.static_pressure
         u_n, _ = ufl.split(self.U_n)
         w, q = ufl.TestFunctions(self.W)
         u_theta = self.theta * u + (1 - self.theta) * u_n

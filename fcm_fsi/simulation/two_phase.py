@@ -14,9 +14,11 @@ One time step tⁿ → tⁿ⁺¹ is three named stages (staggered, each second o
    ρ the PSPG term weights the pressure–gravity residual of an interface cell by 1/ρ_gas on
    its gas side.
 
-Known limitation (docs/two-phase.md): P1 pressure cannot balance ρ(φ)g exactly in cells
-where ρ varies, so at rest the PSPG term leaves a spurious velocity ∝ Δt (≈ 0.5 m/s² · Δt
-for water/air on the still-water tank) that excites the tank's seiche slowly.
+Well-balanced gravity (``fluid.well_balanced``, on by default without blocks): the pressure is
+p' + Π with Π the P2 static pressure of :mod:`~fcm_fsi.fluid.hydrostatic`, re-solved whenever ρ
+changes. The plain P1 pressure cannot balance ρ(φ)g in the cells where ρ varies, so at rest the
+PSPG term leaves a spurious velocity ∝ Δt (≈ 0.5 m/s² · Δt for water/air on the still-water
+tank) that excites the tank's seiche; with Π a layered fluid at rest is exact (docs/two-phase.md).
 
 Time-step rule (with ``run.cfl``): Δt = min(dt_max, C·h_min/max|u|) — the Courant number C
 measured with the smallest cell h_min (the refined surface band), capped by ``run.dt_max``
@@ -39,6 +41,7 @@ from petsc4py import PETSc
 
 from ..config.case import Case
 from ..config.fluid import FluidConfig
+from ..fluid.hydrostatic import StaticPressure, static_pressure_space
 from ..fluid.navier_stokes import NavierStokes, NonlinearSolveError
 from ..fluid.phase_field import PhaseField
 from ..io.timing import StageTimer
@@ -99,9 +102,18 @@ class TwoPhaseModel:
         self.rho = fem.Function(S, name="rho")
         self.mu = fem.Function(S, name="mu")
         self.rho_cell = fem.Function(fem.FunctionSpace(self.mesh, ("DG", 0)), name="rho_cell")
+        ns_options = dict(ns_options or {})
+        coupled = "extra_terms" in ns_options   # a cut-domain (coupled) run
+        self.well_balanced = fl.well_balanced if fl.well_balanced is not None else not coupled
+        if self.well_balanced:
+            ns_options["static_pressure"] = fem.Function(static_pressure_space(self.mesh), name="p_static")
         self.ns = NavierStokes(self.mesh, fl, case.run.dt, facet_tags=tagged.facet_tags,
                                boundary_names=tagged.names, rho=self.rho, mu=self.mu,
-                               pspg_density=self.rho_cell, **(ns_options or {}))
+                               pspg_density=self.rho_cell, **ns_options)
+        self.static = None
+        if self.well_balanced:
+            gravity = (tuple(fl.gravity) + (0.0,) * 3)[:self.gdim]
+            self.static = StaticPressure(self.ns, ns_options["static_pressure"], self.rho, np.array(gravity))
         self.u_adv = fem.Function(self.ns.V, name="u_advect")   # velocity seen by φ
         self.advection_filter = None   # optional fn(u_adv array) editing it in place (coupled runs)
         self.h_interface = interface_cell_size(case, self.h_min)
@@ -122,7 +134,7 @@ class TwoPhaseModel:
         """∫φ ds and ∫p ds on the walls, with the divisors that turn them into lengths/means."""
         ds = ufl.Measure("ds", domain=self.mesh, subdomain_data=tagged.facet_tags,
                          metadata={"quadrature_degree": 2})
-        _, p = ufl.split(self.ns.U)
+        p = self.ns.parts.p      # total pressure (p' + Π when well balanced)
         lo, hi = np.array(self.case.mesh.lower), np.array(self.case.mesh.upper)
         one = fem.Constant(self.mesh, PETSc.ScalarType(1.0))
         comm = self.mesh.comm
@@ -149,6 +161,8 @@ class TwoPhaseModel:
             self.cell_density(self.rho, self.rho_cell)
         else:
             self.rho_cell.interpolate(self.rho)   # cell mean of the P1 ρ (midpoint value)
+        if self.static is not None:
+            self.static.update()
 
     # -------------------------------------------------------------- time step
     def advance(self, t: float, dt: float, timer: StageTimer) -> None:
@@ -171,8 +185,7 @@ class TwoPhaseModel:
             except NonlinearSolveError as err:
                 raise SimulationDiverged(str(err)) from err
             self.ns_iterations = info.iterations
-        self.u_out.x.array[:] = ns.U.x.array[vm]
-        self.p_out.x.array[:] = ns.U.x.array[ns.Q_map]
+        self.set_output()
         self.last_dt = dt
 
     def speed_max(self) -> float:
@@ -224,5 +237,11 @@ class TwoPhaseModel:
         t, steps = checkpoint.globals["two_phase_scalars"]
         ns.t, ns.step_count = float(t), int(steps)
         self.update_properties(self.pf.phi.x.array)
+        self.set_output()
+
+    def set_output(self) -> None:
+        """u and the total pressure p = p' + Π into the output functions."""
+        ns = self.ns
         self.u_out.x.array[:] = ns.U.x.array[ns.V_map]
-        self.p_out.x.array[:] = ns.U.x.array[ns.Q_map]
+        p = ns.U.x.array[ns.Q_map]
+        self.p_out.x.array[:] = p if self.static is None else self.static.total_pressure(p)
