@@ -149,3 +149,18 @@ def test_three_d_tank_levels_and_hydrostatic_pressure():
     assert abs(d["level_left"] - 0.5) < 1e-3 and abs(d["level_right"] - 0.5) < 1e-3
     assert abs(d["volume"] - 0.25) < 1e-4
     assert abs(d["p_bottom"] - p_ref) / p_ref < 5e-3
+
+
+def test_still_water_quick_level_passes(tmp_path):
+    """The verification runner's still_water quick level (20², 1 s, 500 steps) meets the issue's
+    targets: max|u| ≤ 1e-3 m/s and bottom pressure within 0.5 % (it missed by 7.5× before the
+    static pressure Π)."""
+    import json
+
+    from .conftest import mpi_env
+    res = subprocess.run([sys.executable, "-m", "fcm_fsi.verify", "still_water", "--level", "quick",
+                          "--out", str(tmp_path)], cwd=ROOT, env=mpi_env(), capture_output=True, text=True,
+                         timeout=900)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    metrics = json.loads((tmp_path / "still_water" / "metrics.json").read_text())["metrics"]
+    assert metrics["spurious_velocity"]["value"] < 1e-3 and metrics["spurious_velocity"]["pass"]

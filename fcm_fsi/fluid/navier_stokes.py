@@ -436,6 +436,7 @@ class NavierStokes:
             t0 = time.perf_counter()
             self._assemble_jacobian()
             t1 = time.perf_counter()
+            self.ksp.getPC().setReusePreconditioner(bool(cfg.reuse_preconditioner and it > 0))
             self.ksp.solve(self.b, self.dU.vector)
             info.assembly_seconds += t1 - t0
             info.solve_seconds += time.perf_counter() - t1
