@@ -68,11 +68,12 @@ class FluidConfig:
     line_search: int = param(4, doc="Newton/Picard globalisation: when a full update raises the residual norm, halve "
                                     "the update up to this many times (0 = off); converging steps never trigger it",
                              ge=0, le=20)
-    reuse_preconditioner: bool = param(
-        False, doc="build the preconditioner once per time step (first nonlinear iteration) and reuse it for "
-                   "the later iterations of the step: saves the AMG/ILU set-up when the Jacobian changes little "
-                   "(docs/performance.md); the Krylov tolerance is unchanged, so the step converges to the same "
-                   "tolerance — with a direct solver (preonly LU) it turns Newton into a chord iteration")
+    reuse_preconditioner: bool | None = param(
+        None, doc="build the preconditioner once per time step (first nonlinear iteration) and reuse it for "
+                  "the later iterations of the step: saves the AMG/ILU set-up when the Jacobian changes little "
+                  "(docs/performance.md); the Krylov tolerance is unchanged, so the step converges to the same "
+                  "tolerance. null = automatic: on for Krylov solvers, off for a direct solve (ksp_type preonly), "
+                  "where it would turn Newton into a chord iteration")
     max_iterations: int = param(25, doc="nonlinear iterations per step before the run stops with an error", ge=1)
     quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
     well_balanced: bool | None = param(
@@ -86,8 +87,8 @@ class FluidConfig:
     petsc: dict[str, str | int | float | bool] = param(
         default_factory=dict,
         doc="PETSc options of the monolithic (u, p) solve, prefix ns_; empty = automatic: MUMPS LU in 2D, "
-            "in 3D FGMRES + Schur field split with BoomerAMG on the velocity and pressure blocks "
-            "(fcm_fsi.fluid.solvers.SCHUR_AMG; blocks addressed as fieldsplit_u_*, fieldsplit_p_*)")
+            "in 3D FGMRES + Schur field split with GAMG on the velocity block and BoomerAMG on the Schur "
+            "complement (fcm_fsi.fluid.solvers.SCHUR_GAMG; blocks addressed as fieldsplit_u_*, fieldsplit_p_*)")
 
     def __post_init__(self) -> None:
         names = [bc.boundary for bc in self.boundaries]

@@ -249,8 +249,12 @@ class NavierStokes:
         self.A = fem.petsc.create_matrix(self.J_form)
         self.b = fem.petsc.create_vector(self.F_form)
         self.dU = fem.Function(self.W)
-        opts = dict(config.petsc) or dict(solvers.DIRECT_LU if gdim == 2 else solvers.SCHUR_AMG)
+        opts = dict(config.petsc) or dict(solvers.DIRECT_LU if gdim == 2 else solvers.SCHUR_GAMG)
         opts.update(petsc_options or {})
+        reuse = config.reuse_preconditioner
+        # automatic: reuse with a Krylov method (a stale preconditioner only costs iterations),
+        # never with a direct solve, where it would turn Newton into a chord iteration
+        self.reuse_preconditioner = reuse if reuse is not None else opts.get("ksp_type") != "preonly"
         self.ksp = solvers.make_ksp(self.comm, self.A, petsc_prefix, opts, fields=self.field_index_sets())
         self.history: list[StepInfo] = []
         self.backtracks = 0   # line-search halvings over the run (``_backtrack``)
@@ -436,7 +440,7 @@ class NavierStokes:
             t0 = time.perf_counter()
             self._assemble_jacobian()
             t1 = time.perf_counter()
-            self.ksp.getPC().setReusePreconditioner(bool(cfg.reuse_preconditioner and it > 0))
+            self.ksp.getPC().setReusePreconditioner(bool(self.reuse_preconditioner and it > 0))
             self.ksp.solve(self.b, self.dU.vector)
             info.assembly_seconds += t1 - t0
             info.solve_seconds += time.perf_counter() - t1
