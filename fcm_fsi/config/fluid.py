@@ -88,7 +88,8 @@ class FluidConfig:
         default_factory=dict,
         doc="PETSc options of the monolithic (u, p) solve, prefix ns_; empty = automatic: MUMPS LU in 2D, "
             "in 3D FGMRES + Schur field split with GAMG on the velocity block and BoomerAMG on the Schur "
-            "complement (fcm_fsi.fluid.solvers.SCHUR_GAMG; blocks addressed as fieldsplit_u_*, fieldsplit_p_*)")
+            "complement (fcm_fsi.fluid.solvers.SCHUR_GAMG; BoomerAMG on both blocks, SCHUR_AMG, on a cut "
+            "fluid domain); blocks addressed as fieldsplit_u_*, fieldsplit_p_*")
 
     def __post_init__(self) -> None:
         names = [bc.boundary for bc in self.boundaries]
