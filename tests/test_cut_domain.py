@@ -401,3 +401,20 @@ def test_moving_and_submerged_cases_quick_level(tmp_path):
         bad = [m for m in metrics if not m.passed]
         assert not bad, f"{name}: {bad}"
     assert (tmp_path / "moving_cylinder_galilean.png").exists()
+
+
+def test_dutsch_reference_profiles_and_kinematics():
+    """The oscillating_cylinder case reads all 24 Dütsch et al. (1998) profiles, and its
+    steps land on the reference phases with the cylinder where the experiment had it."""
+    from fcm_fsi.verify.cases.cut_oscillating import PHASES, STATIONS, OscillationSetup, dutsch_profiles
+    ref = dutsch_profiles()
+    assert len(ref) == 2 * len(PHASES) * len(STATIONS)
+    for (comp, phase, x), a in ref.items():
+        assert a.shape[1] == 2 and len(a) >= 5, (comp, phase, x)
+        assert np.all(np.abs(a[:, 1]) <= 1.2) and np.all(np.abs(a[:, 0]) <= 1.5)
+    for s in (OscillationSetup(steps_per_cycle=60), OscillationSetup(steps_per_cycle=144)):
+        for phase in PHASES:
+            assert (phase * s.steps_per_cycle) % 360 == 0
+        t180 = 0.5 * s.kc            # φ = ωt = 180°: the cylinder passes x = 0 moving at +U_m
+        assert abs(s.centre(t180)) < 1e-12 and abs(s.velocity(t180) - 1.0) < 1e-12
+        assert abs(s.amplitude - 5.0 / (2 * np.pi)) < 1e-12

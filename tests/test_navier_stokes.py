@@ -209,3 +209,35 @@ def test_fieldsplit_without_fields_is_a_clear_error():
     A.assemble()
     with pytest.raises(ValueError, match="fieldsplit"):
         solvers.make_ksp(MPI.COMM_WORLD, A, "t_", {"pc_type": "fieldsplit"})
+
+
+def test_sponge_layer_damps_a_uniform_stream_at_its_rate():
+    """A uniform stream with do-nothing ends inside a damping zone at full rate σ decays as
+    du/dt = −σu; Crank–Nicolson gives the factor (1 − σΔt/2)/(1 + σΔt/2) per step, exactly
+    (the sink is in the strong residual too, so SUPG/PSPG leave the uniform state alone)."""
+    from fcm_fsi.config.fluid import DampingZone
+    tm = rectangle(MPI.COMM_WORLD, (0.0, 0.0), (2.0, 1.0), (8, 4))
+    sigma, dt, steps = 3.0, 0.05, 6
+    zone = DampingZone(axis="x", start=-2.0, end=-1.0, rate=sigma)     # ξ ≥ 2 on the mesh: σ = rate
+    cfg = FluidConfig(density=2.0, viscosity=0.01, startup_steps=0, rtol=1e-12, atol=1e-13,
+                      damping_zones=(zone,), boundaries=(
+                          BoundaryCondition(boundary="left", kind="do_nothing"),
+                          BoundaryCondition(boundary="right", kind="do_nothing"),
+                          BoundaryCondition(boundary="bottom", kind="slip"),
+                          BoundaryCondition(boundary="top", kind="slip")))
+    ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names)
+    ns.set_velocity(lambda x: np.vstack([np.ones(x.shape[1]), np.zeros(x.shape[1])]))
+    for _ in range(steps):
+        ns.step()
+    u = ns.u.x.array.reshape(-1, 2)
+    factor = ((1 - 0.5 * sigma * dt) / (1 + 0.5 * sigma * dt)) ** steps
+    assert np.abs(u[:, 0] - factor).max() < 1e-10
+    assert np.abs(u[:, 1]).max() < 1e-10
+
+
+def test_sponge_layer_input_errors_name_the_key():
+    from fcm_fsi.config.fluid import DampingZone
+    with pytest.raises(ConfigError, match=r"fluid.damping_zones\[0\].*start ≠ end"):
+        FluidConfig(damping_zones=(DampingZone(axis="x", start=1.0, end=1.0, rate=1.0),))
+    with pytest.raises(ConfigError, match=r"fluid.damping_zones\[0\].axis"):
+        FluidConfig(gravity=(0.0, -9.81), damping_zones=(DampingZone(axis="z", start=0.0, end=1.0, rate=1.0),))

@@ -29,6 +29,19 @@ class BoundaryCondition:
 
 
 @dataclass(frozen=True, kw_only=True)
+class DampingZone:
+    """A sponge layer (numerical beach) along one axis: the momentum sink ρ σ u with
+    σ = rate·ξ², ξ = (s − start)/(end − start) clipped to [0, 1] and s the coordinate along
+    ``axis``. It absorbs the waves a floating or moving body radiates before they reflect
+    from the wall at ``end``; outside [start, end] the flow is untouched."""
+
+    axis: Literal["x", "y", "z"] = param(doc="coordinate the layer runs along")
+    start: float = param(unit="m", doc="coordinate where the damping begins (σ = 0)")
+    end: float = param(unit="m", doc="coordinate where σ reaches ``rate`` (usually the wall); beyond it σ = rate")
+    rate: float = param(unit="1/s", doc="largest damping rate σ", gt=0)
+
+
+@dataclass(frozen=True, kw_only=True)
 class StabilizationConfig:
     """Switches of the residual-based terms of eq 5 (τ from eqs 6–10)."""
 
@@ -52,6 +65,8 @@ class FluidConfig:
     gravity: tuple[float, ...] = param((0.0, 0.0), unit="m/s^2", doc="body force per unit mass f (eq 1), e.g. [0, -9.81]")
     boundaries: tuple[BoundaryCondition, ...] = param(default_factory=tuple,
                                                       doc="boundary conditions; boundaries not listed are do-nothing")
+    damping_zones: tuple[DampingZone, ...] = param(default_factory=tuple,
+                                                   doc="sponge layers (numerical beaches) absorbing waves near walls")
     theta: float = param(0.5, doc="time scheme: 0.5 = Crank–Nicolson, 1 = backward Euler (pseudo-time to steady states)",
                          ge=0.5, le=1.0)
     startup_steps: int = param(2, doc="first steps made of two backward-Euler half steps (Rannacher start-up; "
@@ -98,6 +113,13 @@ class FluidConfig:
             raise ConfigError(f"key 'fluid.boundaries': boundary {dupes[0]!r} has more than one condition")
         if len(self.gravity) not in (2, 3):
             raise ConfigError(f"key 'fluid.gravity' = {list(self.gravity)} must have 2 or 3 entries")
+        for i, z in enumerate(self.damping_zones):
+            if z.start == z.end:
+                raise ConfigError(f"key 'fluid.damping_zones[{i}]': start = end = {z.start:g} m; the layer needs "
+                                  f"a width (start ≠ end)")
+            if "xyz".index(z.axis) >= len(self.gravity):
+                raise ConfigError(f"key 'fluid.damping_zones[{i}].axis' = {z.axis!r}: allowed x, y"
+                                  + (", z" if len(self.gravity) == 3 else f" in {len(self.gravity)}D"))
         for i, bc in enumerate(self.boundaries):
             if bc.kind == "velocity" and len(bc.value) not in (2, 3):
                 raise ConfigError(f"key 'fluid.boundaries[{i}].value' = {list(bc.value)} must have 2 or 3 entries")

@@ -183,6 +183,12 @@ class CutDomain:
         self.body_cells = values[rows, deepest] <= 0     # cells at (cut or touching Γ) or inside a body
         return self.statistics(values)
 
+    def fluid_fractions(self) -> np.ndarray:
+        """Fluid fraction |K ∩ Ω_f| / |K| of every owned cell (0 solid … 1 fluid)."""
+        own = self.cell_coords[: self.n_owned]
+        full = np.abs(np.linalg.det(own[:, 1:] - own[:, :1])) / (2.0 if self.gdim == 2 else 6.0)
+        return np.clip(self.fluid_measure[: self.n_owned] / full, 0.0, 1.0)
+
     def statistics(self, values: np.ndarray) -> CutStatistics:
         own = slice(0, self.n_owned)
         v = values[own]

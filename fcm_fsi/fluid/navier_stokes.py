@@ -62,6 +62,7 @@ class FormParts:
     tau_cont: fem.Function
     strain: fem.Function | None = None   # P1 reconstruction of ε(u_θ) for the strong residual
     rho_pspg: ufl.core.expr.Expr | None = None  # density of the PSPG test ∇q/ρ (default: rho)
+    sigma: ufl.core.expr.Expr | None = None     # sponge-layer damping rate σ(x) [1/s] (None: no layers)
 
 
 def epsilon(u):
@@ -77,8 +78,9 @@ def momentum_residual(s: FormParts):
     for the exact solution up to O(h²).
     """
     strain = s.strain if s.strain is not None else epsilon(s.u_theta)
-    return (s.rho * ((s.u - s.u_n) / s.dt + ufl.grad(s.u_theta) * s.a - s.f)
-            - ufl.div(2 * s.mu * strain) + ufl.grad(s.p))
+    r = (s.rho * ((s.u - s.u_n) / s.dt + ufl.grad(s.u_theta) * s.a - s.f)
+         - ufl.div(2 * s.mu * strain) + ufl.grad(s.p))
+    return r if s.sigma is None else r + s.rho * s.sigma * s.u_theta
 
 
 def galerkin_residual(s: FormParts):
@@ -86,6 +88,25 @@ def galerkin_residual(s: FormParts):
     return (ufl.inner(s.rho * ((s.u - s.u_n) / s.dt + ufl.grad(s.u_theta) * s.a - s.f), s.w) * s.dx
             + ufl.inner(2 * s.mu * epsilon(s.u_theta), epsilon(s.w)) * s.dx
             - s.p * ufl.div(s.w) * s.dx + s.q * ufl.div(s.u) * s.dx)
+
+
+def damping_rate(mesh, zones):
+    """σ(x) [1/s] of the sponge layers (config.fluid.DampingZone): Σ rate·ξ²,
+    ξ = (x_axis − start)/(end − start) clipped to [0, 1]; None without layers."""
+    if not zones:
+        return None
+    x = ufl.SpatialCoordinate(mesh)
+    sigma = 0
+    for z in zones:
+        xi = (x["xyz".index(z.axis)] - z.start) / (z.end - z.start)
+        sigma = sigma + z.rate * ufl.max_value(0.0, ufl.min_value(1.0, xi)) ** 2
+    return sigma
+
+
+def damping_residual(s: FormParts) -> ufl.Form:
+    """Sponge layers: the momentum sink ∫ ρ σ(x) u_θ·w dx (also in the strong residual R_M,
+    so the stabilisation stays consistent; at rest it vanishes)."""
+    return s.rho * s.sigma * ufl.inner(s.u_theta, s.w) * s.dx
 
 
 def do_nothing_correction(s: FormParts, ds):
@@ -285,7 +306,8 @@ class NavierStokes:
         a = u_theta if self.config.nonlinear == "newton" else self.u_adv
         return FormParts(u=u, p=p, u_n=u_n, u_theta=u_theta, a=a, w=w, q=q, rho=self.rho, mu=self.mu,
                          f=self.f, dt=self.dt, dx=self.dx, tau_supg=self.tau_supg, tau_cont=self.tau_cont,
-                         strain=self.strain, rho_pspg=self.rho_pspg)
+                         strain=self.strain, rho_pspg=self.rho_pspg,
+                         sigma=damping_rate(self.mesh, self.config.damping_zones))
 
     def _residual(self, extra_terms: Sequence[ExtraTerm]):
         s, st = self.parts, self.config.stabilization
@@ -298,6 +320,8 @@ class NavierStokes:
         ds_nat = self._natural_measure()
         if ds_nat is not None:
             F = F + do_nothing_correction(s, ds_nat)
+        if s.sigma is not None:
+            F = F + damping_residual(s)
         for term in extra_terms:
             F = F + term(s)
         return F

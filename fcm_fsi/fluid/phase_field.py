@@ -15,7 +15,9 @@ no inflow of liquid, ∫φ dx is conserved to solver tolerance by the conservati
 
 Volume correction (eqs 16–17): V = |{φ ≥ 1/2}| and A = |{φ = 1/2}| measured exactly on
 the P1 field (fcm/cut.py); the interface is shifted by L = (V − V₀)/A by shifting the
-profile's signed distance d = ε ln(φ/(1−φ)) → d − L.
+profile's signed distance d = ε ln(φ/(1−φ)) → d − L. On a cut domain (coupled runs) V and
+A are those of the fluid part (:meth:`PhaseField.volume`), because φ lives on the whole mesh
+and the water that diffuses into a body's fictitious interior is not water of the flow.
 """
 from __future__ import annotations
 
@@ -204,9 +206,13 @@ def p1_cell_geometry(V: fem.FunctionSpace) -> CellGeometry:
     return CellGeometry(dofs, x[dofs])
 
 
-def liquid_volume_and_area(geom: CellGeometry, phi_values: np.ndarray, comm: MPI.Comm) -> tuple[float, float]:
-    """Exact |{φ ≥ 1/2}| and |{φ = 1/2}| of the P1 field (collective)."""
+def liquid_volume_and_area(geom: CellGeometry, phi_values: np.ndarray, comm: MPI.Comm,
+                           cell_weights: np.ndarray | None = None) -> tuple[float, float]:
+    """Exact |{φ ≥ 1/2}| and |{φ = 1/2}| of the P1 field (collective); with ``cell_weights``
+    (one per owned cell, e.g. its fluid fraction) each cell's share is weighted."""
     vol, area = cut_measures(geom.coords, phi_values[geom.dofs] - 0.5)
+    if cell_weights is not None:
+        vol, area = vol * cell_weights, area * cell_weights
     return comm.allreduce(float(vol.sum()), op=MPI.SUM), comm.allreduce(float(area.sum()), op=MPI.SUM)
 
 
@@ -268,6 +274,11 @@ class PhaseField:
         self.steps_done = 0
         self.volume0 = None
         self.mass0 = None
+        #: on a cut domain: the fluid fraction of every owned cell (weights the interface
+        #: measure) and a collective callable giving the liquid volume inside the bodies [m^d],
+        #: which the corrected volume leaves out (both None: the whole mesh)
+        self.volume_cell_weights = None
+        self.liquid_inside_bodies = None
 
     # --- state -------------------------------------------------------------------
     def set_initial(self, shape: InitialShape) -> None:
@@ -283,8 +294,14 @@ class PhaseField:
         return self.comm.allreduce(fem.assemble_scalar(self.mass_form), op=MPI.SUM)
 
     def volume(self) -> tuple[float, float]:
-        """(|{φ ≥ 1/2}|, interface measure) [m^d, m^(d−1)] (collective)."""
-        return liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm)
+        """(|{φ ≥ 1/2}|, interface measure) [m^d, m^(d−1)] (collective), of the whole mesh or,
+        on a cut domain, of its fluid part: the exact whole-mesh volume minus
+        :attr:`liquid_inside_bodies`, the interface measure of each cell times its fluid fraction."""
+        vol, _ = liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm)
+        if self.liquid_inside_bodies is None:
+            return liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm)
+        _, area = liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm, self.volume_cell_weights)
+        return vol - self.liquid_inside_bodies(), area
 
     # --- one step ----------------------------------------------------------------
     def advance(self, dt: float) -> int:

@@ -147,6 +147,18 @@ class CoupledModel:
             self.series_units.update({"water_fluid_part": "m^d", "water_in_blocks": "m^d",
                                       "water_fluid_error": "-", "liquid_volume_fluid": "m^d",
                                       "liquid_volume_error": "-"})
+            self._gauge_half_width = None
+            if self.gdim == 2 and self.nb > 0:
+                # water level on vertical mesh lines just outside block 0 (left, right): the
+                # local waterline for its draft, away from the walls' standing waves
+                b0 = case.dem.blocks[0]
+                half = 0.5 * b0.size[0] if b0.shape == "box" else b0.radius
+                self._gauge_half_width = half + 1.5 * h_max
+                self._pf_x = self.fluid.pf.V.tabulate_dof_coordinates()[:, :2]
+                self._y_bottom = float(case.mesh.lower[1])
+                self.series_units.update({"b0_level_left": "m", "b0_level_right": "m"})
+            self.fluid.pf.liquid_inside_bodies = self._liquid_in_blocks
+            self.fluid.pf.volume0 = self.fluid.pf.volume()[0]
             self.water0 = self.comm.allreduce(fem.assemble_scalar(self._water_forms[0]), op=MPI.SUM)
             self.liquid0 = self._liquid_volume_fluid()
         self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
@@ -258,6 +270,8 @@ class CoupledModel:
         if self._advective_dofs is not None:
             # φ in advective form on the cells at and inside the blocks (phase_field_residual)
             self.fluid.pf.advective_cells.x.array[self._advective_dofs] = self.cut.body_cells
+            # the volume correction holds the liquid of the fluid part
+            self.fluid.pf.volume_cell_weights = self.cut.fluid_fractions()
         return stats
 
     def fluid_part_density(self, rho, rho_cell) -> None:
@@ -518,15 +532,37 @@ class CoupledModel:
             diag.update({"water_fluid_part": wf, "water_in_blocks": wb,
                          "water_fluid_error": (wf - self.water0) / self.water0,
                          "liquid_volume_fluid": lv, "liquid_volume_error": (lv - self.liquid0) / self.liquid0})
+            if self._gauge_half_width is not None:
+                x0 = st.pos[0, 0]
+                diag["b0_level_left"] = self.water_level_at(x0 - self._gauge_half_width)
+                diag["b0_level_right"] = self.water_level_at(x0 + self._gauge_half_width)
         if self.bonds is not None:
             diag["broken_bonds"] = float(np.count_nonzero(self.bonds.broken_bonds()))
         return diag
 
+    def water_level_at(self, x_target: float) -> float:
+        """Water level [m] on the vertical line of P1 nodes nearest to ``x_target`` (2D):
+        bottom + ∫φ dy along it (trapezoid over the nodes; collective)."""
+        x = self._pf_x
+        n = self.fluid.pf.V.dofmap.index_map.size_local
+        d = np.abs(x[:n, 0] - x_target)
+        i = int(np.argmin(d)) if n else -1
+        cands = self.comm.allgather((float(d[i]), float(x[i, 0])) if n else (np.inf, np.nan))
+        x_line = min(cands)[1]
+        on = np.abs(x[:n, 0] - x_line) <= 1e-9 * max(1.0, abs(x_line))
+        pts = np.concatenate(self.comm.allgather(np.c_[x[:n][on, 1], self.fluid.pf.phi.x.array[:n][on]]))
+        pts = pts[np.argsort(pts[:, 0])]
+        return self._y_bottom + float(np.sum(0.5 * (pts[1:, 1] + pts[:-1, 1]) * np.diff(pts[:, 0])))
+
     def _liquid_volume_fluid(self) -> float:
-        """|{φ ≥ ½}| of the fluid part [m^d]: the exact whole-mesh volume the volume correction
-        holds, minus the liquid inside the blocks (collective)."""
-        inside = self.comm.allreduce(fem.assemble_scalar(self._water_forms[2]), op=MPI.SUM)
-        return self.fluid.pf.volume()[0] - inside
+        """|{φ ≥ ½}| of the fluid part [m^d], the volume the correction holds: the exact
+        whole-mesh volume minus :meth:`_liquid_in_blocks` (collective)."""
+        return self.fluid.pf.volume()[0]
+
+    def _liquid_in_blocks(self) -> float:
+        """|{φ ≥ ½}| inside the blocks [m^d]: the indicator at the cut quadrature points
+        weighted by the solid fraction (collective)."""
+        return self.comm.allreduce(fem.assemble_scalar(self._water_forms[2]), op=MPI.SUM)
 
     def health(self, diag: dict[str, float]) -> str | None:
         return self.fluid.health(diag)

@@ -50,7 +50,7 @@ def format_table(name: str, level: str, ranks: int, wall: float, metrics: dict) 
     return "\n".join(lines)
 
 
-def run_one(name: str, level: str, out: Path, np_: int) -> bool:
+def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNING") -> bool:
     """Run a case (re-launching under mpirun when np_ > 1); returns True when all metrics pass."""
     cases = load_all()
     if name not in cases:
@@ -59,7 +59,7 @@ def run_one(name: str, level: str, out: Path, np_: int) -> bool:
         env = mpi_env()
         env["FCM_FSI_VERIFY_INNER"] = "1"
         cmd = _mpirun(np_) + [sys.executable, "-m", "fcm_fsi.verify", name, "--level", level,
-                             "--out", str(out), "--np", str(np_)]
+                             "--out", str(out), "--np", str(np_), "--log-level", log_level]
         rc = subprocess.call(cmd, env=env)
         return rc == 0
     from mpi4py import MPI
@@ -117,8 +117,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("verification"))
     ap.add_argument("--list", action="store_true", help="list the cases and exit")
     ap.add_argument("--report", type=Path, default=None, help="with 'all': write a markdown report here")
+    ap.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING"], default="WARNING",
+                    help="progress messages of the cases (INFO: e.g. per-cycle progress of long runs)")
     args = ap.parse_args(argv)
-    setup_logging("WARNING")
+    setup_logging(args.log_level)
     cases = load_all()
     if args.report is not None and not args.name:   # report of what is already under --out
         write_report(args.out, args.report)
@@ -132,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     ok = True
     for name in names:
         np_ = args.np if args.np is not None else cases[name].default_ranks if name in cases else 1
-        ok &= run_one(name, args.level, args.out, np_)
+        ok &= run_one(name, args.level, args.out, np_, args.log_level)
     if args.report is not None:
         write_report(args.out, args.report)
     return 0 if ok else 1

@@ -83,9 +83,13 @@ def heave_period(t: np.ndarray, y: np.ndarray, y_eq: float) -> float:
     return float(np.diff(times).mean()) if len(times) >= 2 else float("nan")
 
 
-@register("floating_box", "box of half the density of water released at the surface settles at draft H/2 (2D)", issue=8)
+@register("floating_box", "box of half the density of water released half-way to its draft settles at draft H/2 (2D)", issue=8)
 def floating_box(level, out_dir: Path, comm) -> list[Metric]:
-    data = case_at_level("floating_box", level, out_dir, quick_t_end=3.0, quick_cells=[50, 25])
+    data = case_at_level("floating_box", level, out_dir, quick_t_end=3.0, quick_cells=[100, 25])
+    if level == "full":
+        # half the cells, half the step (Δt/h as at the quick level): with the case's 2 ms on the
+        # 1 cm cells the explicit coupling blew up at the first heave minimum (0.41 s, session 9)
+        data["run"]["dt"] = data["run"]["dt_max"] = 1.0e-3
     series, wall, failure = run_coupled(data, out_dir, comm)
     blk = data["dem"]["blocks"][0]
     width, height = blk["size"][0], blk["size"][1]
@@ -93,22 +97,28 @@ def floating_box(level, out_dir: Path, comm) -> list[Metric]:
     rho_b = data["dem"]["materials"][0]["density"]
     draft_ref = (rho_b - rho_a) / (rho_w - rho_a) * height
     t, y = series["t"], series["b0_y"]
+    # the draft against the waterline next to the box (gauges 1.5 cells outside its faces);
+    # the walls' level, which carries the tank's standing waves, is reported beside it
+    level_box = 0.5 * (series["b0_level_left"] + series["b0_level_right"])
     level_wall = 0.5 * (series["level_left"] + series["level_right"])
-    draft = level_wall - (y - 0.5 * height)
+    draft = level_box - (y - 0.5 * height)
     d_end, y_eq = settled_mean(t, draft, y, window=2.0)
+    d_wall, _ = settled_mean(t, level_wall - (y - 0.5 * height), y, window=2.0)
     g = abs(data["fluid"]["gravity"][1])
     m = rho_b * width * height
     m_a = rho_w * np.pi * width ** 2 / 8
     t_est = 2 * np.pi * np.sqrt((m + m_a) / (rho_w * g * width))
     period = heave_period(t, y, y_eq)
     if comm.rank == 0:
-        _plot(out_dir, t, draft, draft_ref, period, t_est)
+        _plot(out_dir, t, draft, level_wall - (y - 0.5 * height), draft_ref, period, t_est)
     t_reached = float(t[-1])
     if failure is not None:
-        d_end = period = float("nan")
+        d_end = d_wall = period = float("nan")
     return [at_least("completed", float(failure is None), 1.0),
             report_only("t_reached", t_reached, note=f"of t_end {data['run']['t_end']} s"),
             rel_error_metric("draft_rel_error", d_end, draft_ref, 0.02),
+            report_only("draft_wall_level", d_wall, reference=draft_ref,
+                        note="the same mean against the walls' water level (standing waves included)"),
             report_only("heave_period", period, reference=float(t_est),
                         note="zero crossings of the centre height; reference: hydrostatic + flat-plate added mass"),
             at_most("exchange_error", float(series["exchange_error"].max()), 1e-10),
@@ -116,12 +126,13 @@ def floating_box(level, out_dir: Path, comm) -> list[Metric]:
             report_only("wall_seconds", wall, note=f"{data['mesh']['cells']} cells, t_end {data['run']['t_end']} s")]
 
 
-def _plot(out: Path, t, draft, draft_ref, period, t_est) -> None:
+def _plot(out: Path, t, draft, draft_wall, draft_ref, period, t_est) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 3.6))
-    ax.plot(t, 100 * draft, label="draft (wall water level − box bottom)")
+    ax.plot(t, 100 * draft, label="draft (water level beside the box − box bottom)")
+    ax.plot(t, 100 * draft_wall, lw=0.8, alpha=0.6, label="wall water level − box bottom")
     ax.axhline(100 * draft_ref, color="k", ls="--", label="hydrostatic draft (ρ_b/ρ_w) H")
     ax.set_xlabel("t [s]"), ax.set_ylabel("draft [cm]")
     ax.set_title(f"floating box: heave period {period:.3f} s (estimate {t_est:.3f} s)")
