@@ -20,9 +20,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from ..io.logging import get_logger, setup_logging
-
-log = get_logger("bench.coupling")
+from ..io.logging import setup_logging
 
 STAGES = ("cut rebuild", "phase field", "properties", "navier-stokes", "exchange", "dem sub-steps",
           "diagnostics", "output", "checkpoint")

@@ -127,6 +127,8 @@ class CutDomain:
         nv = tdim + 1
         self.geom_cells = mesh.geometry.dofmap.array.reshape(ncells, -1)[:, :nv]
         self.cell_coords = np.ascontiguousarray(mesh.geometry.x[self.geom_cells][:, :, : self.gdim])
+        own = self.cell_coords[: self.n_owned]
+        self.owned_cell_volume = np.abs(np.linalg.det(own[:, 1:] - own[:, :1])) / (2.0 if self.gdim == 2 else 6.0)
         self.q_dofs = self.Vq.dofmap.list.array.reshape(ncells, -1)
         self.V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
         self.S1 = fem.FunctionSpace(mesh, ("Lagrange", 1))
@@ -185,18 +187,14 @@ class CutDomain:
 
     def fluid_fractions(self) -> np.ndarray:
         """Fluid fraction |K ∩ Ω_f| / |K| of every owned cell (0 solid … 1 fluid)."""
-        own = self.cell_coords[: self.n_owned]
-        full = np.abs(np.linalg.det(own[:, 1:] - own[:, :1])) / (2.0 if self.gdim == 2 else 6.0)
-        return np.clip(self.fluid_measure[: self.n_owned] / full, 0.0, 1.0)
+        return np.clip(self.fluid_measure[: self.n_owned] / self.owned_cell_volume, 0.0, 1.0)
 
     def statistics(self, values: np.ndarray) -> CutStatistics:
         own = slice(0, self.n_owned)
         v = values[own]
         cut = cut_cells(v)
         solid = v.max(axis=1) < 0
-        full = np.abs(np.linalg.det(self.cell_coords[own, 1:] - self.cell_coords[own, :1])) / (
-            2.0 if self.gdim == 2 else 6.0)
-        frac = self.fluid_measure[own][cut] / full[cut]
+        frac = self.fluid_measure[own][cut] / self.owned_cell_volume[cut]
         s = self.comm.allreduce
         return CutStatistics(cut_cells=s(int(cut.sum())), solid_cells=s(int(solid.sum())),
                              fluid_volume=s(float(self.fluid_measure[own].sum())),

@@ -207,12 +207,12 @@ def p1_cell_geometry(V: fem.FunctionSpace) -> CellGeometry:
 
 
 def liquid_volume_and_area(geom: CellGeometry, phi_values: np.ndarray, comm: MPI.Comm,
-                           cell_weights: np.ndarray | None = None) -> tuple[float, float]:
-    """Exact |{φ ≥ 1/2}| and |{φ = 1/2}| of the P1 field (collective); with ``cell_weights``
-    (one per owned cell, e.g. its fluid fraction) each cell's share is weighted."""
+                           area_weights: np.ndarray | None = None) -> tuple[float, float]:
+    """Exact |{φ ≥ 1/2}| and |{φ = 1/2}| of the P1 field (collective); with ``area_weights``
+    (one per owned cell, e.g. its fluid fraction) each cell's interface measure is weighted."""
     vol, area = cut_measures(geom.coords, phi_values[geom.dofs] - 0.5)
-    if cell_weights is not None:
-        vol, area = vol * cell_weights, area * cell_weights
+    if area_weights is not None:
+        area = area * area_weights
     return comm.allreduce(float(vol.sum()), op=MPI.SUM), comm.allreduce(float(area.sum()), op=MPI.SUM)
 
 
@@ -277,7 +277,7 @@ class PhaseField:
         #: on a cut domain: the fluid fraction of every owned cell (weights the interface
         #: measure) and a collective callable giving the liquid volume inside the bodies [m^d],
         #: which the corrected volume leaves out (both None: the whole mesh)
-        self.volume_cell_weights = None
+        self.interface_cell_weights = None
         self.liquid_inside_bodies = None
 
     # --- state -------------------------------------------------------------------
@@ -297,10 +297,9 @@ class PhaseField:
         """(|{φ ≥ 1/2}|, interface measure) [m^d, m^(d−1)] (collective), of the whole mesh or,
         on a cut domain, of its fluid part: the exact whole-mesh volume minus
         :attr:`liquid_inside_bodies`, the interface measure of each cell times its fluid fraction."""
-        vol, _ = liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm)
+        vol, area = liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm, self.interface_cell_weights)
         if self.liquid_inside_bodies is None:
-            return liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm)
-        _, area = liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm, self.volume_cell_weights)
+            return vol, area
         return vol - self.liquid_inside_bodies(), area
 
     # --- one step ----------------------------------------------------------------

@@ -271,7 +271,7 @@ class CoupledModel:
             # φ in advective form on the cells at and inside the blocks (phase_field_residual)
             self.fluid.pf.advective_cells.x.array[self._advective_dofs] = self.cut.body_cells
             # the volume correction holds the liquid of the fluid part
-            self.fluid.pf.volume_cell_weights = self.cut.fluid_fractions()
+            self.fluid.pf.interface_cell_weights = self.cut.fluid_fractions()
         return stats
 
     def fluid_part_density(self, rho, rho_cell) -> None:

@@ -102,15 +102,16 @@ def floating_box(level, out_dir: Path, comm) -> list[Metric]:
     level_box = 0.5 * (series["b0_level_left"] + series["b0_level_right"])
     level_wall = 0.5 * (series["level_left"] + series["level_right"])
     draft = level_box - (y - 0.5 * height)
+    draft_wall = level_wall - (y - 0.5 * height)
     d_end, y_eq = settled_mean(t, draft, y, window=2.0)
-    d_wall, _ = settled_mean(t, level_wall - (y - 0.5 * height), y, window=2.0)
+    d_wall, _ = settled_mean(t, draft_wall, y, window=2.0)
     g = abs(data["fluid"]["gravity"][1])
     m = rho_b * width * height
     m_a = rho_w * np.pi * width ** 2 / 8
     t_est = 2 * np.pi * np.sqrt((m + m_a) / (rho_w * g * width))
     period = heave_period(t, y, y_eq)
     if comm.rank == 0:
-        _plot(out_dir, t, draft, level_wall - (y - 0.5 * height), draft_ref, period, t_est)
+        _plot(out_dir, t, draft, draft_wall, draft_ref, period, t_est)
     t_reached = float(t[-1])
     if failure is not None:
         d_end = d_wall = period = float("nan")
