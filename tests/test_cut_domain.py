@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import ufl
 from dolfinx import fem
+from petsc4py import PETSc
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
@@ -418,3 +419,45 @@ def test_dutsch_reference_profiles_and_kinematics():
         t180 = 0.5 * s.kc            # φ = ωt = 180°: the cylinder passes x = 0 moving at +U_m
         assert abs(s.centre(t180)) < 1e-12 and abs(s.velocity(t180) - 1.0) < 1e-12
         assert abs(s.amplitude - 5.0 / (2 * np.pi)) < 1e-12
+
+
+def test_wall_penalty_is_positive_semidefinite_with_cell_wise_density():
+    """The penalty matrix ∫_Γ p̄ φ_i φ_j dΓ of a box face lying 0.01 h above a row of mesh
+    nodes, in a density field that varies tenfold across cells (the tail of a diffuse
+    interface in air): with the cell-wise ρ̄, μ̄ of two-phase runs p̄ is constant per cell, the
+    fitted surface weights integrate the quadratic integrand exactly and the matrix is
+    positive semi-definite; with the P1 ρ the integrand is cubic and the same weights make it
+    indefinite (what blew up a floating box whose face came to rest on a mesh line)."""
+    from types import SimpleNamespace
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("dense eigenvalues of a serial matrix")
+    n, h = 8, 1.0 / 8
+    tm = rectangle(MPI.COMM_SELF, (0.0, 0.0), (1.0, 1.0), (n, n))
+    cut = CutDomain(tm.mesh)
+    box = StructureLevelSet(Shapes.box((0, 0, 0), (0.5, 0.5, 1.0), body=0), 1, 0.5)
+    level, owner = box.evaluate(cut.nodes, [[0.5037, 0.5 + 0.25 + 0.01 * h, 0.0]], [[1.0, 0, 0, 0]])
+    stats = cut.update(level, owner, np.zeros((len(level), 2)))
+    assert stats.min_cut_fraction < 0.05
+    S1 = fem.FunctionSpace(tm.mesh, ("Lagrange", 1))
+    rho = fem.Function(S1)
+    rho.interpolate(lambda x: 1.2 + 20.0 * (1 + np.sin(37 * x[0] + 11 * x[1])))
+    rho_cell = fem.Function(fem.FunctionSpace(tm.mesh, ("DG", 0)))
+    rho_cell.interpolate(rho)
+    V = fem.VectorFunctionSpace(tm.mesh, ("Lagrange", 1))
+    u, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+    dt = fem.Constant(tm.mesh, PETSc.ScalarType(1e-3))
+    mu = fem.Constant(tm.mesh, PETSc.ScalarType(1.8e-5))
+
+    def extreme_eigenvalues(rho_pspg):
+        parts = SimpleNamespace(rho=rho, rho_pspg=rho_pspg, mu=mu, mu_cell=None, dt=dt)
+        pbar = cut.penalty_coefficient(parts, cut.h)
+        A = fem.petsc.assemble_matrix(fem.form(pbar * ufl.inner(u, w) * cut.dGamma))
+        A.assemble()
+        ev = np.linalg.eigvalsh(A.convert("dense").getDenseArray())
+        return ev.min(), ev.max()
+
+    lo, hi = extreme_eigenvalues(rho_cell)
+    assert lo >= -1e-12 * hi, (lo, hi)
+    lo_p1, hi_p1 = extreme_eigenvalues(None)
+    print(f"\npenalty matrix eigenvalues: cell-wise ρ̄ [{lo:.3g}, {hi:.3g}], P1 ρ [{lo_p1:.3g}, {hi_p1:.3g}]")
+    assert lo_p1 < -1e-6 * hi_p1, (lo_p1, hi_p1)

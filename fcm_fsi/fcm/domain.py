@@ -24,6 +24,8 @@ would let the wall velocity oscillate). Penalty scaling
 
 i.e. γ times the larger of the viscous and inertial stiffness of a cell of size h, so the
 wall slip velocity is ≈ 1/γ of the velocity scale at any Reynolds number.
+In a two-phase flow ρ and μ here are the cell-wise means ρ̄_K, μ̄_K (constant per cell, so the
+penalty matrix is integrated exactly and stays positive semi-definite: ``penalty_coefficient``).
 
 Cut-cell extension (β = ``extension`` > 0; the coupled runs' default β = 1): the solid part
 of every *cut* cell (weight 1 − c_v at its points) also carries a Brinkman term
@@ -203,8 +205,18 @@ class CutDomain:
 
     # ------------------------------------------------------------------ forms
     def penalty_coefficient(self, parts, h):
-        """p̄ = γ (μ/h + ρ h/Δt) [Pa s/m] (module docstring)."""
-        return self.gamma * (parts.mu / h + parts.rho * h / parts.dt)
+        """p̄ = γ (μ/h + ρ h/Δt) [Pa s/m] (module docstring), with the cell-wise ρ̄, μ̄ of a
+        two-phase flow (``parts.rho_pspg``, ``parts.mu_cell``) where given.
+
+        Why cell-wise: the surface weights integrate polynomials of degree ≤ 2 exactly, so the
+        penalty matrix ∫_Γ p̄ φ_i φ_j dΓ is exact — positive semi-definite — only if p̄ is
+        constant per cell. With the P1 ρ(φ) it is cubic; where Γ runs within a few hundredths
+        of h of a row of mesh nodes the fitted weights are large and of both signs, the matrix
+        loses definiteness by γ ρ h/Δt × the density's variation over the cell, and a box whose
+        face came to rest there in air blew up within 0.01 s (docs/coupling.md)."""
+        rho = parts.rho_pspg if parts.rho_pspg is not None else parts.rho
+        mu = parts.mu_cell if parts.mu_cell is not None else parts.mu
+        return self.gamma * (mu / h + rho * h / parts.dt)
 
     def wall_normal(self):
         """Unit normal of Γ pointing out of the fluid (into the body): −∇s/|∇s|, cell-wise."""
@@ -231,7 +243,8 @@ class CutDomain:
     def extension_traction(self, parts):
         """Force per unit volume the extension's Brinkman term exerts on the body, β ρ/Δt (u − ū),
         on the solid part of cut cells (measure :attr:`dExt`)."""
-        return self.extension * parts.rho / parts.dt * (parts.u - self.wall_velocity)
+        rho = parts.rho_pspg if parts.rho_pspg is not None else parts.rho   # cell-wise, as in p̄
+        return self.extension * rho / parts.dt * (parts.u - self.wall_velocity)
 
     def penalty_term(self):
         """The NS extra term of the wall (pass as ``extra_terms=[...]``): −∫_Γ t_w·w dΓ with

@@ -63,6 +63,7 @@ class FormParts:
     strain: fem.Function | None = None   # P1 reconstruction of ε(u_θ) for the strong residual
     rho_pspg: ufl.core.expr.Expr | None = None  # density of the PSPG test ∇q/ρ (default: rho)
     sigma: ufl.core.expr.Expr | None = None     # sponge-layer damping rate σ(x) [1/s] (None: no layers)
+    mu_cell: ufl.core.expr.Expr | None = None   # cell-wise (DG0) viscosity beside rho_pspg (None: mu)
 
 
 def epsilon(u):
@@ -199,6 +200,8 @@ class NavierStokes:
     pspg_density: density in the PSPG test function ∇q/ρ (default ``rho``). With a density
         jump inside a cell (two-phase), a cell-wise mean ρ keeps the PSPG term from weighting
         the pressure residual by 1/ρ_gas on the gas side of interface cells.
+    cell_viscosity: a cell-wise (DG0) viscosity to go with ``pspg_density`` (terms that need
+        a coefficient constant per cell, e.g. the cut wall's penalty; default ``mu``).
     static_pressure: a known pressure field Π (e.g. the P2 hydrostatic part of
         :mod:`.hydrostatic`); the unknown is then p' and every term uses p' + Π.
     """
@@ -208,7 +211,8 @@ class NavierStokes:
                  dx: ufl.Measure | None = None, extra_terms: Sequence[ExtraTerm] = (),
                  extra_bcs: Sequence[fem.DirichletBC] = (),
                  velocity_functions: dict[str, Callable] | None = None, petsc_prefix: str = "ns_",
-                 petsc_options: dict | None = None, pspg_density=None, static_pressure=None) -> None:
+                 petsc_options: dict | None = None, pspg_density=None, static_pressure=None,
+                 cell_viscosity=None) -> None:
         self.mesh, self.config, self.comm = mesh, config, mesh.comm
         cell = mesh.ufl_cell()
         gdim = mesh.geometry.dim
@@ -226,6 +230,7 @@ class NavierStokes:
         self.facet_tags, self.boundary_names = facet_tags, dict(boundary_names or {})
         self.rho = rho if rho is not None else fem.Constant(mesh, PETSc.ScalarType(config.density))
         self.rho_pspg = pspg_density
+        self.mu_cell = cell_viscosity
         self.static_pressure = static_pressure
         self.mu = mu if mu is not None else fem.Constant(mesh, PETSc.ScalarType(config.viscosity))
         g = tuple(config.gravity) + (0.0,) * max(0, gdim - len(config.gravity))
@@ -306,7 +311,7 @@ class NavierStokes:
         a = u_theta if self.config.nonlinear == "newton" else self.u_adv
         return FormParts(u=u, p=p, u_n=u_n, u_theta=u_theta, a=a, w=w, q=q, rho=self.rho, mu=self.mu,
                          f=self.f, dt=self.dt, dx=self.dx, tau_supg=self.tau_supg, tau_cont=self.tau_cont,
-                         strain=self.strain, rho_pspg=self.rho_pspg,
+                         strain=self.strain, rho_pspg=self.rho_pspg, mu_cell=self.mu_cell,
                          sigma=damping_rate(self.mesh, self.config.damping_zones))
 
     def _residual(self, extra_terms: Sequence[ExtraTerm]):

@@ -283,7 +283,11 @@ class CoupledModel:
             self._rho_forms = (fem.form(rho * v0 * self.cut.dx), fem.form(v0 * self.cut.dx))
         num = fem.petsc.assemble_vector(self._rho_forms[0])
         den = fem.petsc.assemble_vector(self._rho_forms[1])
-        rho_cell.x.array[: len(num.array)] = num.array / den.array
+        # the fitted weights may be negative at some points: keep the mean within the phases'
+        # densities (it sets the wall penalty p̄ and the PSPG scaling, which must stay positive)
+        fl = self.case.fluid
+        lo, hi = sorted((fl.density, fl.gas_density))
+        rho_cell.x.array[: len(num.array)] = np.clip(num.array / den.array, lo, hi)
         rho_cell.x.scatter_forward()
         num.destroy(), den.destroy()
 

@@ -102,6 +102,7 @@ class TwoPhaseModel:
         self.rho = fem.Function(S, name="rho")
         self.mu = fem.Function(S, name="mu")
         self.rho_cell = fem.Function(fem.FunctionSpace(self.mesh, ("DG", 0)), name="rho_cell")
+        self.mu_cell = fem.Function(self.rho_cell.function_space, name="mu_cell")
         ns_options = dict(ns_options or {})
         coupled = "extra_terms" in ns_options   # a cut-domain (coupled) run
         self.well_balanced = fl.well_balanced if fl.well_balanced is not None else not coupled
@@ -109,7 +110,7 @@ class TwoPhaseModel:
             ns_options["static_pressure"] = fem.Function(static_pressure_space(self.mesh), name="p_static")
         self.ns = NavierStokes(self.mesh, fl, case.run.dt, facet_tags=tagged.facet_tags,
                                boundary_names=tagged.names, rho=self.rho, mu=self.mu,
-                               pspg_density=self.rho_cell, **ns_options)
+                               pspg_density=self.rho_cell, cell_viscosity=self.mu_cell, **ns_options)
         self.static = None
         if self.well_balanced:
             gravity = (tuple(fl.gravity) + (0.0,) * 3)[:self.gdim]
@@ -161,6 +162,9 @@ class TwoPhaseModel:
             self.cell_density(self.rho, self.rho_cell)
         else:
             self.rho_cell.interpolate(self.rho)   # cell mean of the P1 ρ (midpoint value)
+        # μ and ρ are both affine in the clipped φ, so the cell's μ follows from its ρ̄
+        share = (self.rho_cell.x.array - fl.gas_density) / (fl.density - fl.gas_density)
+        self.mu_cell.x.array[:] = fl.gas_viscosity + (fl.viscosity - fl.gas_viscosity) * np.clip(share, 0.0, 1.0)
         if self.static is not None:
             self.static.update()
 
