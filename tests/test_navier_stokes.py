@@ -219,7 +219,9 @@ def test_sponge_layer_damps_a_uniform_stream_at_its_rate():
     tm = rectangle(MPI.COMM_WORLD, (0.0, 0.0), (2.0, 1.0), (8, 4))
     sigma, dt, steps = 3.0, 0.05, 6
     zone = DampingZone(axis="x", start=-2.0, end=-1.0, rate=sigma)     # ξ ≥ 2 on the mesh: σ = rate
-    cfg = FluidConfig(density=2.0, viscosity=0.01, startup_steps=0, rtol=1e-12, atol=1e-13,
+    # the stream enters through the left do-nothing end: plain do-nothing (backflow 0), which the
+    # directional form would otherwise damp there by design
+    cfg = FluidConfig(density=2.0, viscosity=0.01, startup_steps=0, rtol=1e-12, atol=1e-13, backflow=0.0,
                       damping_zones=(zone,), boundaries=(
                           BoundaryCondition(boundary="left", kind="do_nothing"),
                           BoundaryCondition(boundary="right", kind="do_nothing"),
@@ -241,3 +243,27 @@ def test_sponge_layer_input_errors_name_the_key():
         FluidConfig(damping_zones=(DampingZone(axis="x", start=1.0, end=1.0, rate=1.0),))
     with pytest.raises(ConfigError, match=r"fluid.damping_zones\[0\].axis"):
         FluidConfig(gravity=(0.0, -9.81), damping_zones=(DampingZone(axis="z", start=0.0, end=1.0, rate=1.0),))
+
+
+def test_backflow_term_acts_only_where_fluid_enters_an_open_boundary():
+    """Directional do-nothing (fluid.backflow): a uniform stream through a channel with open
+    ends stays exactly uniform with the plain condition; with β = 1 it loses kinetic energy
+    through the end where it enters. (Where u·n > 0 the term vanishes: the Poiseuille outflow
+    tests above run with the default β = 1 and are unchanged.)"""
+    tm = rectangle(MPI.COMM_WORLD, (0.0, 0.0), (2.0, 1.0), (8, 4))
+
+    def stream(beta: float) -> np.ndarray:
+        cfg = FluidConfig(density=2.0, viscosity=0.01, startup_steps=0, rtol=1e-12, atol=1e-13, backflow=beta,
+                          boundaries=(BoundaryCondition(boundary="left", kind="do_nothing"),
+                                      BoundaryCondition(boundary="right", kind="do_nothing"),
+                                      BoundaryCondition(boundary="bottom", kind="slip"),
+                                      BoundaryCondition(boundary="top", kind="slip")))
+        ns = NavierStokes(tm.mesh, cfg, 0.05, facet_tags=tm.facet_tags, boundary_names=tm.names)
+        ns.set_velocity(lambda x: np.vstack([np.ones(x.shape[1]), np.zeros(x.shape[1])]))
+        for _ in range(3):
+            ns.step()
+        return ns.u.x.array.reshape(-1, 2)[:, 0]
+
+    assert np.abs(stream(0.0) - 1.0).max() < 1e-10
+    damped = stream(1.0)
+    assert MPI.COMM_WORLD.allreduce(float(damped.max()), op=MPI.MAX) < 1.0 - 1e-3

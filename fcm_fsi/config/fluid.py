@@ -80,6 +80,11 @@ class FluidConfig:
                                       "by this factor (0 = recompute every iteration: the step solves the equations "
                                       "with τ(uⁿ⁺¹) exactly; e.g. 1e-3 stops Newton cycling when the switch of eq 10 "
                                       "flips, τ then lags the converged iterate slightly)", ge=0, lt=1)
+    backflow: float = param(1.0, doc="β of the directional do-nothing condition: on do_nothing boundaries the "
+                                     "residual gets −β ∫ ½ ρ min(u·n, 0) u·w ds, which removes the kinetic energy "
+                                     "that flow entering through an open boundary would otherwise bring in unchecked "
+                                     "(backflow instability; zero where the flow leaves); 0 = plain do-nothing",
+                            ge=0, le=10)
     line_search: int = param(4, doc="Newton/Picard globalisation: when a full update raises the residual norm, halve "
                                     "the update up to this many times (0 = off); converging steps never trigger it",
                              ge=0, le=20)

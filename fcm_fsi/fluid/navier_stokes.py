@@ -117,6 +117,16 @@ def do_nothing_correction(s: FormParts, ds):
     return -ufl.inner(s.mu * ufl.grad(s.u_theta).T * n, s.w) * ds
 
 
+def backflow_residual(s: FormParts, ds, beta: float):
+    """Directional do-nothing (Braack & Mucha 2014): −β ∫ ½ ρ min(a·n, 0) u_θ·w ds on natural
+    boundaries. Where fluid enters (a·n < 0) the energy balance of the do-nothing condition gains
+    the uncontrolled flux −½ρ(a·n)|u|²; this term takes it out again. Where the flow leaves it is zero,
+    so outflow solutions (Poiseuille, the Schäfer–Turek channel) are unchanged."""
+    n = ufl.FacetNormal(s.u.ufl_domain())
+    inflow = ufl.min_value(ufl.dot(s.a, n), 0.0)
+    return -beta * 0.5 * s.rho * inflow * ufl.inner(s.u_theta, s.w) * ds
+
+
 def supg_pspg_residual(s: FormParts, supg: bool, pspg: bool):
     """SUPG and PSPG terms of eq 5, τ_pspg = τ_supg (eq 7)."""
     test = 0
@@ -325,6 +335,8 @@ class NavierStokes:
         ds_nat = self._natural_measure()
         if ds_nat is not None:
             F = F + do_nothing_correction(s, ds_nat)
+            if self.config.backflow > 0:
+                F = F + backflow_residual(s, ds_nat, self.config.backflow)
         if s.sigma is not None:
             F = F + damping_residual(s)
         for term in extra_terms:
