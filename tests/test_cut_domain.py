@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import ufl
 from dolfinx import fem
-from petsc4py import PETSc
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from fcm_fsi.config.fluid import BoundaryCondition, FluidConfig
 from fcm_fsi.dem.bodies import axis_angle_quat
@@ -449,7 +449,7 @@ def test_wall_penalty_is_positive_semidefinite_with_cell_wise_density():
     mu = fem.Constant(tm.mesh, PETSc.ScalarType(1.8e-5))
 
     def extreme_eigenvalues(rho_pspg):
-        parts = SimpleNamespace(rho=rho, rho_pspg=rho_pspg, mu=mu, mu_cell=None, dt=dt)
+        parts = SimpleNamespace(cell_density=rho if rho_pspg is None else rho_pspg, cell_viscosity=mu, dt=dt)
         pbar = cut.penalty_coefficient(parts, cut.h)
         A = fem.petsc.assemble_matrix(fem.form(pbar * ufl.inner(u, w) * cut.dGamma))
         A.assemble()

@@ -214,9 +214,7 @@ class CutDomain:
         of h of a row of mesh nodes the fitted weights are large and of both signs, the matrix
         loses definiteness by γ ρ h/Δt × the density's variation over the cell, and a box whose
         face came to rest there in air blew up within 0.01 s (docs/coupling.md)."""
-        rho = parts.rho_pspg if parts.rho_pspg is not None else parts.rho
-        mu = parts.mu_cell if parts.mu_cell is not None else parts.mu
-        return self.gamma * (mu / h + rho * h / parts.dt)
+        return self.gamma * (parts.cell_viscosity / h + parts.cell_density * h / parts.dt)
 
     def wall_normal(self):
         """Unit normal of Γ pointing out of the fluid (into the body): −∇s/|∇s|, cell-wise."""
@@ -243,8 +241,8 @@ class CutDomain:
     def extension_traction(self, parts):
         """Force per unit volume the extension's Brinkman term exerts on the body, β ρ/Δt (u − ū),
         on the solid part of cut cells (measure :attr:`dExt`)."""
-        rho = parts.rho_pspg if parts.rho_pspg is not None else parts.rho   # cell-wise, as in p̄
-        return self.extension * rho / parts.dt * (parts.u - self.wall_velocity)
+        # the cell-wise density, as in p̄
+        return self.extension * parts.cell_density / parts.dt * (parts.u - self.wall_velocity)
 
     def penalty_term(self):
         """The NS extra term of the wall (pass as ``extra_terms=[...]``): −∫_Γ t_w·w dΓ with
@@ -256,9 +254,8 @@ class CutDomain:
             self._parts = parts
             F = -ufl.inner(self.wall_traction(parts), parts.w) * self.dGamma
             if self.extension > 0:
-                rp = parts.rho_pspg if parts.rho_pspg is not None else parts.rho
                 F = F + ufl.inner(self.extension_traction(parts), parts.w) * self.dExt
-                F = F + self.extension * parts.tau_supg * ufl.inner(ufl.grad(parts.q) / rp,
+                F = F + self.extension * parts.tau_supg * ufl.inner(ufl.grad(parts.q) / parts.cell_density,
                                                                     momentum_residual(parts)) * self.dExt
             if self.wall != "penalty":
                 adj = parts.q * self.wall_normal()

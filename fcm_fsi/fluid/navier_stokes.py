@@ -65,6 +65,16 @@ class FormParts:
     sigma: ufl.core.expr.Expr | None = None     # sponge-layer damping rate σ(x) [1/s] (None: no layers)
     mu_cell: ufl.core.expr.Expr | None = None   # cell-wise (DG0) viscosity beside rho_pspg (None: mu)
 
+    @property
+    def cell_density(self):
+        """ρ for terms that need it constant per cell: the cell-wise ``rho_pspg`` when given, else ``rho``."""
+        return self.rho_pspg if self.rho_pspg is not None else self.rho
+
+    @property
+    def cell_viscosity(self):
+        """μ for terms that need it constant per cell: ``mu_cell`` when given, else ``mu``."""
+        return self.mu_cell if self.mu_cell is not None else self.mu
+
 
 def epsilon(u):
     """Rate-of-strain tensor ε(u) (eq 4)."""
@@ -133,7 +143,7 @@ def supg_pspg_residual(s: FormParts, supg: bool, pspg: bool):
     if supg:
         test = test + ufl.grad(s.w) * s.a
     if pspg:
-        test = test + ufl.grad(s.q) / (s.rho_pspg if s.rho_pspg is not None else s.rho)
+        test = test + ufl.grad(s.q) / s.cell_density
     if test == 0:
         return None
     return s.tau_supg * ufl.inner(test, momentum_residual(s)) * s.dx

@@ -164,7 +164,7 @@ class TwoPhaseModel:
             self.rho_cell.interpolate(self.rho)   # cell mean of the P1 ρ (midpoint value)
         # μ and ρ are both affine in the clipped φ, so the cell's μ follows from its ρ̄
         share = (self.rho_cell.x.array - fl.gas_density) / (fl.density - fl.gas_density)
-        self.mu_cell.x.array[:] = fl.gas_viscosity + (fl.viscosity - fl.gas_viscosity) * np.clip(share, 0.0, 1.0)
+        self.mu_cell.x.array[:] = property_map(share, fl.viscosity, fl.gas_viscosity)
         if self.static is not None:
             self.static.update()
 

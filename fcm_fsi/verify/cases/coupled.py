@@ -226,7 +226,8 @@ def block_overturn(level, out_dir: Path, comm) -> list[Metric]:
     45° — past the tipping angle atan(b/H) = 26.6° at which its centre of mass passes over the
     stopper, so it cannot return. Sliding after toppling = the centre's x travel from the first
     time it is turned by 45° to the end; sliding_monotone = 1 when it grows strictly from 30° to
-    20° to 15°. Both are 0 unless all three runs reached t_end. volume_error as in ``dam_break_block`` (the worst of the three runs)."""
+    20° to 15°. Both are 0 unless all three runs reached t_end. volume_error as in
+    ``dam_break_block`` (the worst of the three runs)."""
     results = {}
     metrics = []
     for phi in OVERTURN_FRICTION:
