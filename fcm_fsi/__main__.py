@@ -87,9 +87,9 @@ def main(argv: list[str] | None = None) -> int:
     from .simulation.loop import SimulationDiverged
     try:
         run_case(case, out, comm, args.restart, args.case.resolve().parent)
-    except ConfigError as err:
+    except ConfigError as err:   # found while setting the case up: name the file too
         if comm.rank == 0:
-            print(f"error: {err}", file=sys.stderr)
+            print(f"error: {args.case}: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except (SimulationDiverged, FloatingPointError) as err:
         log.error("run stopped: %s", err)

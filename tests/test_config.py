@@ -130,3 +130,21 @@ def test_resolution_levels_merge_and_name_the_allowed_levels():
         case_from_dict(data)
     paper = load_case(ROOT / "cases" / "tsunami_building.yaml", ["resolution=paper"])
     assert paper.dem.dt == 1.0e-5 and paper.mesh.refine[0].size == 0.01
+
+
+def test_cli_phase_field_without_liquid_names_file_and_key(tmp_path):
+    """A liquid region outside the mesh is bad input (it used to end in a ZeroDivisionError in
+    the diagnostics): exit 2, one line naming the case file and phase_field.initial."""
+    import yaml
+    data = {"name": "dry", "run": {"t_end": 0.01, "dt": 0.005},
+            "mesh": {"kind": "rectangle", "lower": [0, 0], "upper": [1, 1], "cells": [4, 4]},
+            "phase_field": {"initial": {"shape": "box", "lower": [2.0, 2.0], "upper": [3.0, 3.0]}},
+            "fluid": {"density": 1000.0, "viscosity": 1e-3, "gas_density": 1.2, "gas_viscosity": 1.8e-5,
+                      "gravity": [0.0, -9.81], "pressure_reference": [1.0, 1.0],
+                      "boundaries": [{"boundary": b, "kind": "slip"} for b in ("left", "right", "bottom", "top")]}}
+    f = tmp_path / "dry.yaml"
+    f.write_text(yaml.safe_dump(data))
+    res = run_cli([str(f), "--output", str(tmp_path / "out")])
+    assert res.returncode == 2
+    assert str(f) in res.stderr and "phase_field.initial" in res.stderr and "no liquid" in res.stderr
+    assert "Traceback" not in res.stderr + res.stdout

@@ -148,3 +148,22 @@ def test_block_resting_on_the_floor_stays_at_rest_with_the_gap_fill(tmp_path):
     b = read(tmp_path / "bare" / "series.csv")
     assert bare.returncode != 0 or np.sqrt(b["b0_vx"] ** 2 + b["b0_vy"] ** 2).max() > 100 * speed.max()
 
+
+
+def test_settling_sphere_reference_correlations():
+    """The settling_sphere reference: the terminal velocity balances weight and Schiller–Naumann
+    drag, tends to Stokes' law at Re ≪ 1, and the Di Felice wall factor is 1 without walls and
+    (1 − λ)^3.3-like at Re → 0 (the Stokes-regime wall effect)."""
+    from fcm_fsi.verify.cases.settling import di_felice_wall_factor, schiller_naumann_cd, terminal_velocity
+    d, rho_s, rho_f, g = 0.01, 2000.0, 1000.0, 9.81
+    u = terminal_velocity(d, rho_s, rho_f, 0.15, g)
+    re = rho_f * u * d / 0.15
+    drag = schiller_naumann_cd(re) * 0.5 * rho_f * u ** 2 * np.pi * d ** 2 / 4
+    assert drag == pytest.approx((rho_s - rho_f) * g * np.pi * d ** 3 / 6, rel=1e-10)
+    assert 1.0 < re < 20.0
+    mu = 50.0   # Re ~ 1e-4: Stokes
+    stokes = (rho_s - rho_f) * g * d ** 2 / (18 * mu)
+    assert terminal_velocity(d, rho_s, rho_f, mu, g) == pytest.approx(stokes, rel=1e-3)
+    assert di_felice_wall_factor(12.9, 0.0) == 1.0
+    assert di_felice_wall_factor(1e-9, 0.05) == pytest.approx((0.95 / (1 - 0.0165)) ** 3.3, rel=1e-8)
+    assert di_felice_wall_factor(13.0, 0.05) > di_felice_wall_factor(1.0, 0.05)   # walls matter less at higher Re

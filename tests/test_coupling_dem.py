@@ -71,6 +71,25 @@ def test_held_force_gives_closed_form_velocity_and_impulse(one_numba_thread):
     assert 0 < ex.dt_over_dt_cr < 0.2 and ex.wall_seconds > 0
 
 
+def test_mean_velocity_is_the_displacement_over_the_fluid_step(one_numba_thread):
+    """``coupling.wall_velocity: mean``: the sub-steps' mean v equals (x_end − x_start)/Δt_f
+    (leapfrog), i.e. half the end velocity for a block starting from rest under a constant
+    load, and the mean ω likewise; ``rigid_velocity(mean=True)`` uses them."""
+    g = np.array([0.0, 0.0, -9.81])
+    sub = DEMSubcycler(build_system(dem_config([free_sphere()], g)))
+    st = sub.system.state
+    x0 = st.pos.copy()
+    fluid_dt = 1e-3
+    sub.advance(fluid_dt, np.array([[0.3, -0.2, 0.5]]), np.array([[1e-4, 2e-4, -3e-4]]))
+    ex = sub.last
+    np.testing.assert_allclose(ex.mean_velocity, (st.pos - x0) / fluid_dt, rtol=1e-10)
+    np.testing.assert_allclose(ex.mean_velocity, 0.5 * st.vel * (1 + 1 / ex.n_sub), rtol=1e-10)
+    np.testing.assert_allclose(ex.mean_omega, 0.5 * st.omega * (1 + 1 / ex.n_sub), rtol=1e-10)
+    point, owner = st.pos + np.array([[0.0, 0.0, 0.0]]), np.array([0])
+    np.testing.assert_allclose(sub.rigid_velocity(point, owner, mean=True), ex.mean_velocity, rtol=1e-12)
+    np.testing.assert_allclose(sub.rigid_velocity(point, owner), st.vel, rtol=1e-12)
+
+
 def test_linear_mode_delivers_the_trapezoid_impulse(one_numba_thread):
     """Ramp from the previous exchange's load to the new one: Δt (F0 + F1)/2, and the block's
     momentum change is exactly that impulse (no gravity, no contact)."""

@@ -461,3 +461,32 @@ def test_wall_penalty_is_positive_semidefinite_with_cell_wise_density():
     lo_p1, hi_p1 = extreme_eigenvalues(None)
     print(f"\npenalty matrix eigenvalues: cell-wise ρ̄ [{lo:.3g}, {hi:.3g}], P1 ρ [{lo_p1:.3g}, {hi_p1:.3g}]")
     assert lo_p1 < -1e-6 * hi_p1, (lo_p1, hi_p1)
+
+
+def test_slip_wall_penalises_only_the_normal_velocity():
+    """``slip``: the wall term acts on ((u − ū)·n) n. A uniform u₀ past a disc then gives the
+    force p̄ ∮ n (n·u₀) ds = p̄ (perimeter/2) u₀ (∮ n⊗n ds = (perimeter/2) I on a circle): half
+    the no-slip force p̄ × perimeter × u₀, the tangential half of u₀ exerting none."""
+    tm = rectangle(MPI.COMM_WORLD, (0.0, 0.0), (1.0, 1.0), (16, 16))
+    rho, mu, dt, radius = 2.0, 0.05, 0.01, 0.15
+    centres = np.array([[0.5, 0.47, 0.0]])
+    forces = {}
+    for slip in (False, True):
+        cut = CutDomain(tm.mesh, alpha=1e-3, penalty=50.0, slip=slip)
+        shapes = Shapes.cylinder((0, 0, 0), radius, 1.0, body=0)
+        level, owner = StructureLevelSet(shapes, 1, 0.2).evaluate(cut.nodes, centres, np.array([[1.0, 0, 0, 0]]))
+        cut.update(level, owner, np.zeros((len(level), 2)))
+        cfg = FluidConfig(density=rho, viscosity=mu, quadrature_degree=cut.degree,
+                          boundaries=tuple(BoundaryCondition(boundary=b, kind="no_slip")
+                                           for b in ("left", "right", "bottom", "top")))
+        ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names,
+                          dx=cut.dx, extra_terms=[cut.penalty_term()], petsc_options={"ksp_type": "preonly"})
+        u0 = np.array([0.7, -0.3])
+        ns.U.x.array[ns.V_map] = np.tile(u0, len(ns.V_map) // 2)
+        forces[slip] = cut.body_forces(1, centres)[0][0]
+    h = math.sqrt(4 * 0.5 / 16 ** 2 / math.pi)
+    full = 50.0 * (mu / h + rho * h / dt) * 2 * math.pi * radius * u0
+    np.testing.assert_allclose(forces[False], full, rtol=0.02)
+    np.testing.assert_allclose(forces[True], 0.5 * full, rtol=0.03)
+    with pytest.raises(ValueError, match="slip"):
+        CutDomain(tm.mesh, wall="nitsche", slip=True)

@@ -267,3 +267,31 @@ def test_backflow_term_acts_only_where_fluid_enters_an_open_boundary():
     assert np.abs(stream(0.0) - 1.0).max() < 1e-10
     damped = stream(1.0)
     assert MPI.COMM_WORLD.allreduce(float(damped.max()), op=MPI.MAX) < 1.0 - 1e-3
+
+
+def test_gmres_breakdown_is_accepted_only_when_the_true_residual_meets_rtol():
+    """solvers.check_converged accepts a KSP 'breakdown' only if ‖b − A x‖ ≤ rtol ‖b‖: the helper
+    says yes for a solved system and no once the solution is perturbed."""
+    from petsc4py import PETSc
+    from fcm_fsi.fluid.solvers import _true_residual_met
+    n = 20
+    A = PETSc.Mat().createAIJ([n, n], nnz=3, comm=PETSc.COMM_SELF)
+    for i in range(n):
+        A.setValue(i, i, 4.0)
+        if i > 0:
+            A.setValue(i, i - 1, -1.0)
+        if i < n - 1:
+            A.setValue(i, i + 1, -1.0)
+    A.assemble()
+    b = A.createVecLeft()
+    b.setArray(np.linspace(1.0, 2.0, n))
+    x = A.createVecRight()
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    ksp.setOperators(A)
+    ksp.setType("gmres")
+    ksp.getPC().setType("none")
+    ksp.setTolerances(rtol=1e-8)
+    ksp.solve(b, x)
+    assert _true_residual_met(ksp)
+    x.array[0] += 1e-3            # ‖A δx‖ ≈ 4e-3 ≫ 1e-8 ‖b‖
+    assert not _true_residual_met(ksp)

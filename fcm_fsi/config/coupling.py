@@ -5,6 +5,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from .fields import param
+from .loader import ConfigError
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -19,6 +20,14 @@ class CouplingConfig:
         "pressure", doc="wall terms on Γ: penalty (the paper's; leaks under pressure: slip ≈ p/p̄); pressure: "
                         "penalty + the pressure part of the wall traction (no leak, stable for any cut); nitsche: "
                         "full symmetric Nitsche (needs p̄ ≳ μ/(f h) in cut cells of fluid fraction f)")
+    wall_slip: bool = param(
+        False, doc="the wall penalty (and the cut-cell extension) act on the normal velocity only: a slip wall "
+                   "without shear, for meshes far coarser than the boundary layer, where a no-slip wall's discrete "
+                   "reaction is a spurious shear of order ρ h |u|/Δt (docs/tsunami.md); false = no-slip")
+    wall_velocity: Literal["end", "mean"] = param(
+        "end", doc="block velocity the fluid's wall condition gets for the next step: end = v, ω at the end of the "
+                   "DEM sub-steps; mean = their mean over the sub-steps (the displacement / Δt_f), which does not "
+                   "alias vibrations of bonded blocks far faster than the fluid step into the fluid (docs/tsunami.md)")
     cut_extension: float = param(
         1.0, doc="β of the cut-cell extension: the solid part of every cut cell carries a Brinkman term "
                  "β ρ/Δt (u − ū) (its reaction is part of the block load) and β × the PSPG term, so nodes with "
@@ -60,3 +69,8 @@ class CouplingConfig:
     band: float | None = param(None, unit="m", doc="level-set band half-width (default 2 × the largest cell)", gt=0)
     check_every: int = param(100, unit="steps", doc="compare the replicated DEM state across MPI ranks every this "
                                                     "many fluid steps", ge=1)
+
+    def __post_init__(self) -> None:
+        if self.wall_slip and self.wall == "nitsche":
+            raise ConfigError("key 'coupling.wall_slip' = true needs 'coupling.wall' 'penalty' or 'pressure' "
+                              "(the Nitsche terms are no-slip)")

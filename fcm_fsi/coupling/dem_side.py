@@ -157,6 +157,8 @@ class Exchange:
     angular_impulse: np.ndarray    # (nb, 3) Σ ext_torque·dt, about the centres of mass [N m s]
     wall_seconds: float            # wall time of the DEM steps [s]
     dt_over_dt_cr: float           # DEM dt / Δt_cr, the stability margin (< dem.dt_safety) [-]
+    mean_velocity: np.ndarray      # (nb, 3) Σ v dt / Δt_f: the displacement over the step / Δt_f [m/s]
+    mean_omega: np.ndarray         # (nb, 3) Σ ω dt / Δt_f [rad/s]
 
 
 class DEMSubcycler:
@@ -186,6 +188,7 @@ class DEMSubcycler:
         F0, T0 = st.ext_force.copy(), st.ext_torque.copy()
         F1, T1 = _per_block(force, st.nb, "force"), _per_block(torque, st.nb, "torque")
         impulse, angular = np.zeros((st.nb, 3)), np.zeros((st.nb, 3))
+        v_sum, w_sum = np.zeros((st.nb, 3)), np.zeros((st.nb, 3))
         st.ext_force[:], st.ext_torque[:] = F1, T1
         wall0 = time.perf_counter()
         for k in range(n):
@@ -196,20 +199,26 @@ class DEMSubcycler:
             impulse += dt * st.ext_force
             angular += dt * st.ext_torque
             self.system.step()
+            v_sum += st.vel      # leapfrog: x_{k+1} = x_k + dt v_{k+1/2}, so Σ v dt is the displacement
+            w_sum += st.omega
         wall = time.perf_counter() - wall0
         st.ext_force[:], st.ext_torque[:] = F1, T1
-        self.last = Exchange(n, impulse, angular, wall, dt / self.system.critical_time_step())
+        self.last = Exchange(n, impulse, angular, wall, dt / self.system.critical_time_step(),
+                             v_sum / max(n, 1), w_sum / max(n, 1))
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies of the centres of mass (nb, 3) [m] and orientations (nb, 4) (w, x, y, z)."""
         st = self.system.state
         return st.pos.copy(), st.quat.copy()
 
-    def rigid_velocity(self, points: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    def rigid_velocity(self, points: np.ndarray, owner: np.ndarray, mean: bool = False) -> np.ndarray:
         """Rigid-body velocity ū [m/s] at ``points`` (n, 3) of block ``owner`` (n,), zero
         where owner < 0. Uses the leapfrog velocities v, ω of the last half step (within
-        O(Δt_DEM) of the end of the fluid step)."""
+        O(Δt_DEM) of the end of the fluid step), or with ``mean`` their means over the last
+        fluid step's sub-steps (``coupling.wall_velocity: mean``)."""
         st = self.system.state
+        if mean and self.last is not None:
+            return rigid_body_velocity(st.pos, self.last.mean_velocity, self.last.mean_omega, points, owner)
         return rigid_body_velocity(st.pos, st.vel, st.omega, points, owner)
 
     def check_replicated(self, comm) -> None:

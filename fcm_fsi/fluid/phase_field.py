@@ -32,6 +32,7 @@ from dolfinx import fem
 import dolfinx.fem.petsc
 from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_vector
 
+from ..config.loader import ConfigError
 from ..config.phase_field import InitialShape, PhaseFieldConfig
 from ..fcm.cut import cut_measures
 
@@ -229,6 +230,13 @@ def shift_interface(phi_values: np.ndarray, shift: float, eps: float) -> np.ndar
     return np.where((phi_values > 0) & (phi_values < 1), shifted, phi_values)
 
 
+def describe_shape(shape: InitialShape) -> str:
+    """The set keys of an initial shape, for error messages."""
+    keys = {"box": ("lower", "upper", "bed_depth"), "surface_wave": ("depth", "amplitude")}.get(
+        shape.shape, ("center", "radius"))
+    return ", ".join(f"{k} = {getattr(shape, k)}" for k in keys)
+
+
 class PhaseField:
     """φ on P1 with its compiled forms and solver; ``advance(dt)`` makes one step."""
 
@@ -288,6 +296,10 @@ class PhaseField:
         self.phi_nm1.x.array[:] = self.phi.x.array
         self.volume0 = self.volume()[0]
         self.mass0 = self.mass()
+        if not self.volume0 > 0.0:
+            raise ConfigError(f"key 'phase_field.initial' ({shape.shape}, {describe_shape(shape)}): the liquid region "
+                              "does not overlap the mesh — there is no liquid to simulate (φ = 1 must cover part "
+                              "of mesh.lower..mesh.upper)")
 
     def mass(self) -> float:
         """∫φ dx [m^d] (collective)."""

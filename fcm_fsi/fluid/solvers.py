@@ -71,7 +71,27 @@ def make_ksp(comm, A: PETSc.Mat, prefix: str, options: dict,
 def check_converged(ksp: PETSc.KSP, step: int, time: float) -> None:
     """Raise when the last solve diverged (collective: the reason is the same on all ranks)."""
     reason = ksp.getConvergedReason()
+    if reason == PETSc.KSP.ConvergedReason.DIVERGED_BREAKDOWN and _true_residual_met(ksp):
+        return
     if reason < 0:
         raise LinearSolveError(f"linear solve {ksp.getOptionsPrefix()} diverged at step {step} "
                                f"(t = {time:.6g} s): reason {reason}, {ksp.getIterationNumber()} iterations, "
                                f"residual {ksp.getResidualNorm():.3e}")
+
+
+def _true_residual_met(ksp: PETSc.KSP) -> bool:
+    """‖b − A x‖ ≤ rtol ‖b‖ for the last solve (collective).
+
+    GMRES reports a breakdown when it cannot extend its Krylov space, which can also happen
+    once the residual is already at round-off: seen on the tsunami case with bjacobi/ILU,
+    'reason -5, 400 iterations, residual 2.8e-10'. Such a solve is accepted when the true
+    residual meets the relative tolerance; a real breakdown fails this test and still raises."""
+    A, _ = ksp.getOperators()
+    b, x = ksp.getRhs(), ksp.getSolution()
+    r = b.duplicate()
+    A.mult(x, r)
+    r.aypx(-1.0, b)                     # r = b − A x
+    rtol = ksp.getTolerances()[0]
+    ok = r.norm() <= rtol * b.norm()
+    r.destroy()
+    return bool(ok)

@@ -68,7 +68,7 @@ class CoupledModel:
         self.mesh = build_mesh(case.mesh, comm, case_dir)
         self.gdim = self.mesh.geometry.dim
         self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, wall=cp.wall,
-                             extension=cp.cut_extension)
+                             extension=cp.cut_extension, slip=cp.wall_slip)
         ns_options = {"dx": self.cut.dx, "extra_terms": [self.cut.penalty_term()]}
         fluid_case = dataclasses.replace(case, fluid=dataclasses.replace(case.fluid, quadrature_degree=self.cut.degree))
         if case.phase_field is not None:
@@ -257,7 +257,8 @@ class CoupledModel:
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
         if velocities is None:
-            ubar = self.dem.rigid_velocity(self.points, owner)[:, : self.gdim]
+            ubar = self.dem.rigid_velocity(self.points, owner, mean=self.case.coupling.wall_velocity == "mean")
+            ubar = ubar[:, : self.gdim]
         else:
             from ..coupling.dem_side import rigid_body_velocity
             v = velocities.reshape(2 * self.nb, 3)
@@ -584,6 +585,8 @@ class CoupledModel:
                     out[f"dem_int{k}__{name}"] = np.copy(a)
         out["coupling__accel"] = np.concatenate([self.accel, self.alpha_ang])
         out["coupling__relaxed_load"] = self.relaxed_load.copy()
+        if self.dem.last is not None:
+            out["coupling__mean_velocity"] = np.concatenate([self.dem.last.mean_velocity, self.dem.last.mean_omega])
         if self.system.ledger is not None:
             out["dem__ledger"] = np.copy(self.system.ledger.checkpoint_arrays()["ledger"])
         return out
@@ -597,6 +600,11 @@ class CoupledModel:
         self.accel[:], self.alpha_ang[:] = g["coupling__accel"][: self.nb], g["coupling__accel"][self.nb:]
         if "coupling__relaxed_load" in g:
             self.relaxed_load[:] = g["coupling__relaxed_load"]
+        if "coupling__mean_velocity" in g:
+            from ..coupling.dem_side import Exchange
+            m = g["coupling__mean_velocity"]
+            zero = np.zeros((self.nb, 3))
+            self.dem.last = Exchange(0, zero, zero, 0.0, 0.0, m[: self.nb].copy(), m[self.nb:].copy())
         for k, it in enumerate(self.system.interactions):
             if hasattr(it, "restore"):
                 prefix = f"dem_int{k}__"
