@@ -157,8 +157,6 @@ class Exchange:
     angular_impulse: np.ndarray    # (nb, 3) Σ ext_torque·dt, about the centres of mass [N m s]
     wall_seconds: float            # wall time of the DEM steps [s]
     dt_over_dt_cr: float           # DEM dt / Δt_cr, the stability margin (< dem.dt_safety) [-]
-    mean_velocity: np.ndarray      # (nb, 3) Σ v dt / Δt_f: the displacement over the step / Δt_f [m/s]
-    mean_omega: np.ndarray         # (nb, 3) Σ ω dt / Δt_f [rad/s]
 
 
 class DEMSubcycler:
@@ -171,6 +169,10 @@ class DEMSubcycler:
     def __init__(self, system: DEMSystem):
         self.system = system
         self.last: Exchange | None = None
+        # means of v, ω over the last advance's sub-steps (nb, 3): the displacement / Δt_f [m/s],
+        # and [rad/s]; None before the first advance (state that a checkpoint must carry)
+        self.mean_velocity: np.ndarray | None = None
+        self.mean_omega: np.ndarray | None = None
 
     def advance(self, fluid_dt: float, force: np.ndarray, torque: np.ndarray,
                 mode: Literal["hold", "linear"] = "hold") -> None:
@@ -203,8 +205,8 @@ class DEMSubcycler:
             w_sum += st.omega
         wall = time.perf_counter() - wall0
         st.ext_force[:], st.ext_torque[:] = F1, T1
-        self.last = Exchange(n, impulse, angular, wall, dt / self.system.critical_time_step(),
-                             v_sum / max(n, 1), w_sum / max(n, 1))
+        self.last = Exchange(n, impulse, angular, wall, dt / self.system.critical_time_step())
+        self.mean_velocity, self.mean_omega = v_sum / max(n, 1), w_sum / max(n, 1)
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Copies of the centres of mass (nb, 3) [m] and orientations (nb, 4) (w, x, y, z)."""
@@ -217,8 +219,8 @@ class DEMSubcycler:
         O(Δt_DEM) of the end of the fluid step), or with ``mean`` their means over the last
         fluid step's sub-steps (``coupling.wall_velocity: mean``)."""
         st = self.system.state
-        if mean and self.last is not None:
-            return rigid_body_velocity(st.pos, self.last.mean_velocity, self.last.mean_omega, points, owner)
+        if mean and self.mean_velocity is not None:
+            return rigid_body_velocity(st.pos, self.mean_velocity, self.mean_omega, points, owner)
         return rigid_body_velocity(st.pos, st.vel, st.omega, points, owner)
 
     def check_replicated(self, comm) -> None:

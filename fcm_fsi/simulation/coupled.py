@@ -585,8 +585,8 @@ class CoupledModel:
                     out[f"dem_int{k}__{name}"] = np.copy(a)
         out["coupling__accel"] = np.concatenate([self.accel, self.alpha_ang])
         out["coupling__relaxed_load"] = self.relaxed_load.copy()
-        if self.dem.last is not None:
-            out["coupling__mean_velocity"] = np.concatenate([self.dem.last.mean_velocity, self.dem.last.mean_omega])
+        if self.dem.mean_velocity is not None:
+            out["coupling__mean_velocity"] = np.concatenate([self.dem.mean_velocity, self.dem.mean_omega])
         if self.system.ledger is not None:
             out["dem__ledger"] = np.copy(self.system.ledger.checkpoint_arrays()["ledger"])
         return out
@@ -601,10 +601,8 @@ class CoupledModel:
         if "coupling__relaxed_load" in g:
             self.relaxed_load[:] = g["coupling__relaxed_load"]
         if "coupling__mean_velocity" in g:
-            from ..coupling.dem_side import Exchange
             m = g["coupling__mean_velocity"]
-            zero = np.zeros((self.nb, 3))
-            self.dem.last = Exchange(0, zero, zero, 0.0, 0.0, m[: self.nb].copy(), m[self.nb:].copy())
+            self.dem.mean_velocity, self.dem.mean_omega = m[: self.nb].copy(), m[self.nb:].copy()
         for k, it in enumerate(self.system.interactions):
             if hasattr(it, "restore"):
                 prefix = f"dem_int{k}__"
