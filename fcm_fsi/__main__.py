@@ -34,6 +34,21 @@ def write_resolved_case(case, out: Path, rank: int) -> None:
         (out / "case.resolved.yaml").write_text(yaml.safe_dump(to_dict(case), sort_keys=False))
 
 
+def reference_blas_loaded(maps: str | None = None) -> bool:
+    """True when this process runs on Debian's reference BLAS (``.../blas/libblas.so.3``) and
+    no optimised one (OpenBLAS, BLIS, MKL) — direct solves are then ≈ 3× slower
+    (docs/performance.md). ``maps``: the text of /proc/self/maps (read when None)."""
+    if maps is None:
+        try:
+            maps = Path("/proc/self/maps").read_text()
+        except OSError:
+            return False
+    libs = {line.split()[-1] for line in maps.splitlines() if ".so" in line}
+    reference = any("/blas/libblas.so" in lib for lib in libs)
+    optimised = any(k in lib for lib in libs for k in ("openblas", "blis", "mkl"))
+    return reference and not optimised
+
+
 def run_case(case, out: Path, comm, restart: str | None, case_dir: Path) -> None:
     """Dispatch on the physics present in the case."""
     physics = case.physics
@@ -84,7 +99,10 @@ def main(argv: list[str] | None = None) -> int:
     write_resolved_case(case, out, comm.rank)
     comm.barrier()
     log.info("case %s (%s) on %d rank(s) -> %s", case.name, case.physics, comm.size, out)
-    from .simulation.loop import SimulationDiverged
+    from .simulation.loop import SimulationDiverged   # imports PETSc, and with it the BLAS
+    if reference_blas_loaded():
+        log.warning("running on the reference BLAS: direct (MUMPS) solves are about 3x slower; "
+                    "install libopenblas0-serial (.ci/setup.sh, docs/performance.md)")
     try:
         run_case(case, out, comm, args.restart, args.case.resolve().parent)
     except ConfigError as err:   # found while setting the case up: name the file too

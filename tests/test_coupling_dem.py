@@ -12,7 +12,8 @@ import pytest
 
 from fcm_fsi.config.dem import DEMConfig
 from fcm_fsi.config.loader import build
-from fcm_fsi.coupling.dem_side import DEMSubcycler, shapes_of_blocks, substep_count
+from fcm_fsi.coupling.dem_side import (DEMSubcycler, fluid_thickness, fluid_volume_ratio, shapes_of_blocks,
+                                       substep_count)
 from fcm_fsi.dem.model import build_state, build_structure, build_system
 from fcm_fsi.dem.state import quat_to_matrix_np
 from fcm_fsi.fcm.levelset import BOX, SPHERE
@@ -171,6 +172,28 @@ def test_min_thickness_widens_thin_boxes_in_the_level_set_only():
     wide = shapes_of_blocks(cfg, st, min_thickness=0.15)
     np.testing.assert_allclose(wide.half[0], [0.1, 0.075, 0.075])
     np.testing.assert_allclose(shapes_of_blocks(cfg, st).half[0], [0.1, 0.06, 0.04])
+
+
+def test_fluid_volume_ratio_is_the_widened_box_over_the_true_one():
+    """The added mass of a widened block uses the volume the fluid sees: edges 0.12 and 0.08 m
+    widened to 0.15 m give (0.15/0.12)(0.15/0.08) in 3D; in 2D the edge along z (here the
+    unrotated box's 0.08 m depth) does not count; a sphere block and no widening give 1."""
+    cfg = dem_config([box_block(), free_sphere(position=[0.5, 0.0, 0.0])])
+    st = build_state(cfg)
+    np.testing.assert_allclose(fluid_volume_ratio(cfg, st, 0.15, 3), [(0.15 / 0.12) * (0.15 / 0.08), 1.0])
+    np.testing.assert_allclose(fluid_volume_ratio(cfg, st, 0.15, 2), [0.15 / 0.12, 1.0])
+    np.testing.assert_allclose(fluid_volume_ratio(cfg, st, 0.0, 3), [1.0, 1.0])
+
+
+def test_fluid_thickness_is_the_thinnest_widened_extent():
+    """Box 0.2 × 0.12 × 0.08: 0.08 in 3D, 0.12 in 2D (the z edge is the depth), 0.15 once
+    widened to 0.15; a sphere block: its diameter."""
+    cfg = dem_config([box_block(), free_sphere(position=[0.5, 0.0, 0.0])])
+    st = build_state(cfg)
+    d = 2 * st.sph_radius[st.blk_sph_start[1]]
+    np.testing.assert_allclose(fluid_thickness(cfg, st, 0.0, 3), [0.08, d])
+    np.testing.assert_allclose(fluid_thickness(cfg, st, 0.0, 2), [0.12, d])
+    np.testing.assert_allclose(fluid_thickness(cfg, st, 0.15, 3), [0.15, max(d, 0.0)])
 
 
 def test_every_block_kind_is_covered_in_state_order():

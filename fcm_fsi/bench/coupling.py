@@ -29,9 +29,9 @@ STAGES = ("cut rebuild", "phase field", "properties", "navier-stokes", "exchange
 def run_size(cells: tuple[int, int], t_end: float, out: Path, comm) -> dict:
     from ..simulation.coupled import CoupledModel
     from ..simulation.loop import TimeLoop
-    from ..verify.cases.coupled import case_at_level
+    from ..verify.cases.coupled import case_at_level, shorter_coarser
     from ..verify.cases.two_phase import case_output
-    data = case_at_level("block_overturn", "quick", out, quick_t_end=t_end, quick_cells=list(cells))
+    data = case_at_level("block_overturn", "quick", out, shorter_coarser(t_end, list(cells)))
     case, sub = case_output(data, out, comm)
     t0 = time.perf_counter()
     model = CoupledModel(case, comm, out_dir=sub)

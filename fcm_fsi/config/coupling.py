@@ -61,7 +61,9 @@ class CouplingConfig:
     force_mode: Literal["hold", "linear"] = param(
         "hold", doc="fluid load over the DEM sub-steps: hold = constant; linear = ramp from the previous exchange")
     added_mass: float = param(0.0, doc="C_a of the added-mass stabilisation: each block's DEM inertia is raised by "
-                                       "m̃ = C_a ρ̄ V_block (ρ̄: mean fluid density on the block's wetted surface, each step) and the load by m̃ a of the previous fluid step "
+                                       "m̃ = C_a ρ̄ V_block (ρ̄: mean fluid density on the block's wetted surface, each step; "
+                                       "V_block as the fluid sees it, i.e. widened by min_thickness) and the load by m̃ a "
+                                       "of the previous fluid step "
                                        "(exact when converged; needed when the block's added mass exceeds its own)",
                               ge=0, le=20)
     depth: float | None = param(None, unit="m", doc="2D fluid only: out-of-plane extent of the blocks; the "

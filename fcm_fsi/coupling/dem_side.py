@@ -41,12 +41,12 @@ import numpy as np
 
 from ..config.dem import DEMConfig
 from ..dem.model import build_structure, template_of
-from ..dem.state import DEMState
+from ..dem.state import DEMState, quat_to_matrix_np
 from ..dem.system import DEMSystem, substep_count
 from ..fcm.levelset import BOX, SPHERE, Shapes
 
-__all__ = ["DEMSubcycler", "Exchange", "rigid_body_velocity", "shapes_of_blocks", "state_digests",
-           "substep_count"]
+__all__ = ["DEMSubcycler", "Exchange", "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity",
+           "shapes_of_blocks", "state_digests", "substep_count"]
 
 REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # compared across ranks
 
@@ -79,6 +79,47 @@ def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0
     if first != state.nb:
         raise ValueError(f"the DEM config describes {first} blocks but the state has {state.nb}")
     return Shapes.concat(parts)
+
+
+def fluid_volume_ratio(cfg: DEMConfig, state: DEMState, min_thickness: float, gdim: int) -> np.ndarray:
+    """Per block (nb,): volume of the shape the fluid sees / the block's own volume, ≥ 1.
+
+    Box and structure blocks thinner than ``min_thickness`` are widened in the fluid's level
+    set (:func:`shapes_of_blocks`), so the fluid the wall penalty drags along with such a block
+    — its numerical added mass — belongs to the widened shape, not to the true one (a 0.2 m
+    wall widened to 0.8 m: ×4). In a 2D fluid the box axis along z is the depth, not seen by
+    the fluid, and does not count. 1 for sphere and clump blocks and without widening."""
+    ratio = np.ones(state.nb)
+    if min_thickness <= 0.0:
+        return ratio
+    true, wide = shapes_of_blocks(cfg, state), shapes_of_blocks(cfg, state, min_thickness)
+    boxes = np.flatnonzero(true.kind == BOX)
+    factor = np.where(_depth_axes(true, boxes, state, gdim), 1.0, wide.half[boxes] / true.half[boxes])
+    np.multiply.at(ratio, true.body[boxes], np.prod(factor, axis=1))
+    return ratio
+
+
+def fluid_thickness(cfg: DEMConfig, state: DEMState, min_thickness: float, gdim: int) -> np.ndarray:
+    """Per block (nb,): its thinnest extent [m] as the fluid sees it — the shortest edge of a
+    box block after the ``min_thickness`` widening (in 2D not the depth along z), the smallest
+    sphere diameter of a sphere or clump block. A wall must be about two cells thick to hold a
+    pressure difference (docs/coupling.md, 'Thin walls')."""
+    shapes = shapes_of_blocks(cfg, state, min_thickness)
+    extent = np.where(shapes.kind[:, None] == BOX, 2.0 * shapes.half, np.inf)
+    extent[:, 0] = np.where(shapes.kind == SPHERE, 2.0 * shapes.half[:, 0], extent[:, 0])
+    boxes = np.flatnonzero(shapes.kind == BOX)
+    extent[boxes] = np.where(_depth_axes(shapes, boxes, state, gdim), np.inf, extent[boxes])
+    thin = np.full(state.nb, np.inf)
+    np.minimum.at(thin, shapes.body, extent.min(axis=1))
+    return thin
+
+
+def _depth_axes(shapes: Shapes, boxes: np.ndarray, state: DEMState, gdim: int) -> np.ndarray:
+    """(len(boxes), 3) bool: in a 2D fluid, the box axis that points along z (the depth)."""
+    if gdim == 3:
+        return np.zeros((len(boxes), 3), bool)
+    axes = quat_to_matrix_np(state.quat[shapes.body[boxes]]) @ shapes.rot[boxes]   # columns: axes in world
+    return np.abs(axes[:, 2, :]) > 0.5
 
 
 def gap_walls(cfg: DEMConfig, gdim: int) -> np.ndarray:

@@ -20,7 +20,7 @@ from ..io.checkpoint import case_fingerprint, read_checkpoint, write_checkpoint
 from ..io.csv import TimeSeriesCSV
 from ..io.fields import FieldWriter
 from ..io.logging import get_logger
-from ..io.timing import StageTimer
+from ..io.timing import StageTimer, peak_memory_line
 from ..fluid.navier_stokes import NonlinearSolveError
 from ..fluid.solvers import LinearSolveError
 
@@ -135,7 +135,9 @@ class TimeLoop:
         if self.fields:
             self.fields.close()
         self.series.close()
-        log.info("finished %s: %d steps to t = %.6g s\n%s", self.case.name, self.step, self.t, self.timer.table())
+        memory = peak_memory_line(self.comm)
+        log.info("finished %s: %d steps to t = %.6g s\n%s\n%s", self.case.name, self.step, self.t,
+                 self.timer.table(), memory)
         return diag
 
 

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import yaml
 from mpi4py import MPI
 
+from ...config.case import apply_resolution
 from ...simulation.coupled import CoupledModel
 from ...io.logging import get_logger
 from ...simulation.loop import SimulationDiverged, TimeLoop
@@ -31,16 +33,27 @@ log = get_logger("verify")
 CASES = Path(__file__).resolve().parents[3] / "cases"
 
 
-def case_at_level(name: str, level: str, out_dir: Path, quick_t_end: float, quick_cells: list[int]) -> dict:
-    """``cases/<name>.yaml`` as a mapping, writing to ``out_dir``; the quick level is shorter
-    and coarser, only the full level writes XDMF."""
+def case_at_level(name: str, level: str, out_dir: Path, quick: Callable[[dict], None] | None = None,
+                  resolution: bool = False) -> dict:
+    """``cases/<name>.yaml`` as a mapping, writing to ``out_dir``; only the full level writes
+    XDMF. ``quick`` edits the mapping in place at the quick level (shorter, coarser);
+    ``resolution`` first applies the case's own ``resolution`` setting (``resolutions``)."""
     data = yaml.safe_load((CASES / f"{name}.yaml").read_text())
+    if resolution:
+        data = apply_resolution(data, name)
     data["output"]["directory"] = str(out_dir)
     data["output"]["xdmf"] = level == "full"
-    if level == "quick":
-        data["run"]["t_end"] = quick_t_end
-        data["mesh"]["cells"] = list(quick_cells)
+    if level == "quick" and quick is not None:
+        quick(data)
     return data
+
+
+def shorter_coarser(t_end: float, cells: list[int]) -> Callable[[dict], None]:
+    """Quick-level edit of a structured-mesh case: run to ``t_end`` on ``cells``."""
+    def edit(data: dict) -> None:
+        data["run"]["t_end"] = t_end
+        data["mesh"]["cells"] = list(cells)
+    return edit
 
 
 def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.ndarray], float, str | None]:
@@ -85,7 +98,7 @@ def heave_period(t: np.ndarray, y: np.ndarray, y_eq: float) -> float:
 
 @register("floating_box", "box of half the density of water released half-way to its draft settles at draft H/2 (2D)", issue=8)
 def floating_box(level, out_dir: Path, comm) -> list[Metric]:
-    data = case_at_level("floating_box", level, out_dir, quick_t_end=3.0, quick_cells=[100, 25])
+    data = case_at_level("floating_box", level, out_dir, shorter_coarser(3.0, [100, 25]))
     if level == "full":
         # half the cells, half the step (Δt/h as at the quick level); runs through since the
         # wall penalty takes the cell-wise density (docs/coupling.md, session 10)
@@ -164,7 +177,7 @@ def dam_break_block(level, out_dir: Path, comm) -> list[Metric]:
     The block 'moved' when its centre travelled more than its own width, and 'tumbled' when
     it turned by more than 90° (onto another face) at some time; both only in a run that
     reached t_end."""
-    data = case_at_level("dam_break_block", level, out_dir, quick_t_end=0.6, quick_cells=[100, 30])
+    data = case_at_level("dam_break_block", level, out_dir, shorter_coarser(0.6, [100, 30]))
     series, wall, failure = run_coupled(data, out_dir, comm)
     blk = data["dem"]["blocks"][0]
     x0, y0 = blk["position"][0], blk["position"][1]
@@ -231,7 +244,7 @@ def block_overturn(level, out_dir: Path, comm) -> list[Metric]:
     results = {}
     metrics = []
     for phi in OVERTURN_FRICTION:
-        data = case_at_level("block_overturn", level, out_dir, quick_t_end=1.0, quick_cells=[128, 48])
+        data = case_at_level("block_overturn", level, out_dir, shorter_coarser(1.0, [128, 48]))
         data["name"] = f"block_overturn_f{phi:g}"
         data["dem"]["materials"][0]["friction_angle"] = phi
         series, wall, failure = run_coupled(data, out_dir, comm)

@@ -19,11 +19,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import yaml
-from mpi4py import MPI
 
 from ..registry import Metric, at_most, register, rel_error_metric, report_only
-from .coupled import CASES, run_coupled
+from .coupled import case_at_level, run_coupled
 
 #: fraction of the run at its end over which the terminal velocity is averaged
 WINDOW = 0.2
@@ -72,23 +70,17 @@ def terminal_reference(data: dict) -> dict[str, float]:
     return {"u_inf": u_inf, "re": re, "wall_factor": factor, "u_t": factor * u_inf, "d": d, "width": width}
 
 
-def case_at_level(level: str, out_dir: Path) -> dict:
-    """``cases/settling_sphere.yaml`` as a mapping. Quick: cells d/4 in the sphere's column
-    (d/6 at the full level), the same fall; only the full level writes XDMF. (A quick level
-    stopped at 0.4 s measured the velocity before the plateau: −6.7 %.)"""
-    data = yaml.safe_load((CASES / "settling_sphere.yaml").read_text())
-    data["output"]["directory"] = str(out_dir)
-    data["output"]["xdmf"] = level == "full"
-    if level == "quick":
-        data["mesh"]["refine"] = [{"lower": [-0.03, -0.03, 0.02], "upper": [0.03, 0.03, 0.29], "size": 0.006},
-                                  {"lower": [-0.012, -0.012, 0.08], "upper": [0.012, 0.012, 0.265], "size": 0.0025}]
-    return data
+def quick_column(data: dict) -> None:
+    """Quick level: cells d/4 in the sphere's column (d/6 at the full level), the same fall.
+    (A quick level stopped at 0.4 s measured the velocity before the plateau: −6.7 %.)"""
+    data["mesh"]["refine"] = [{"lower": [-0.03, -0.03, 0.02], "upper": [0.03, 0.03, 0.29], "size": 0.006},
+                              {"lower": [-0.012, -0.012, 0.08], "upper": [0.012, 0.012, 0.265], "size": 0.0025}]
 
 
 @register("settling_sphere", "sphere settling in a viscous liquid reaches the Schiller–Naumann terminal velocity "
                              "(wall-corrected) at Re ≈ 13 (3D)", issue=8)
 def settling_sphere(level, out_dir: Path, comm) -> list[Metric]:
-    data = case_at_level(level, out_dir)
+    data = case_at_level("settling_sphere", level, out_dir, quick_column)
     series, wall, failure = run_coupled(data, out_dir, comm)
     ref = terminal_reference(data)
     t, v = series["t"], -series["b0_vz"]
