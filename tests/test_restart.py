@@ -1,6 +1,7 @@
 """Checkpoint/restart: 2N steps equal N steps + restart + N steps, on 1 and on 2 ranks."""
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import h5py
@@ -94,7 +95,7 @@ def test_single_phase_fluid_case_runs_and_restarts(tmp_path, root):
     np.testing.assert_allclose(a[-1, :6], b[-1, :6], rtol=1e-10)
 
 
-def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path):
+def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path, caplog):
     """A linear (or nonlinear) solve that fails inside a step reaches the user as
     SimulationDiverged naming the step, the time and the last good checkpoint — the CLI's
     'run stopped' message — not as a PETSc traceback."""
@@ -104,6 +105,9 @@ def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path):
     from fcm_fsi.simulation.loop import SimulationDiverged, TimeLoop
     root = Path(__file__).resolve().parents[1]
     case = load_case(root / "cases" / "still_water.yaml", ["output.xdmf=false", "output.checkpoint=false"])
+    caplog.set_level(logging.INFO, logger="fcm_fsi")
+    logger = logging.getLogger("fcm_fsi")      # does not propagate once setup_logging ran in this process
+    logger.addHandler(caplog.handler)
 
     class FailingModel:
         mesh, output_functions, series_units = None, [], {}
@@ -122,3 +126,6 @@ def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path):
 
     with pytest.raises(SimulationDiverged, match=r"step 1, t = 0 s .*reason -11; last good checkpoint: .*checkpoint.h5"):
         TimeLoop(case, FailingModel(), tmp_path, MPI.COMM_WORLD, None).run()
+    # the cost so far is still reported (a diverged run used to end without its timing table)
+    logger.removeHandler(caplog.handler)
+    assert "stopped still_water after 0 steps" in caplog.text and "peak memory (max RSS)" in caplog.text

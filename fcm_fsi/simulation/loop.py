@@ -20,7 +20,7 @@ from ..io.checkpoint import case_fingerprint, read_checkpoint, write_checkpoint
 from ..io.csv import TimeSeriesCSV
 from ..io.fields import FieldWriter
 from ..io.logging import get_logger
-from ..io.timing import StageTimer, peak_memory_line
+from ..io.timing import StageTimer, peak_memory_line, peak_memory_mib
 from ..fluid.navier_stokes import NonlinearSolveError
 from ..fluid.solvers import LinearSolveError
 
@@ -97,6 +97,12 @@ class TimeLoop:
         with self.timer("output"):
             self.series.write(step=self.step, t=self.t, dt=dt, **diag)
 
+    def _log_cost_at_stop(self) -> None:
+        """The timing table and this rank's peak memory up to a divergence (not collective: the
+        ranks may not all reach the stop together)."""
+        log.info("stopped %s after %d steps at t = %.6g s\n%s\npeak memory (max RSS) of this rank %.0f MiB",
+                 self.case.name, self.step, self.t, self.timer.table(), peak_memory_mib())
+
     def run(self) -> dict[str, float]:
         run, wall0 = self.case.run, time.perf_counter()
         t0 = self.t
@@ -111,6 +117,7 @@ class TimeLoop:
             try:
                 self.model.advance(self.t, dt, self.timer)
             except (SimulationDiverged, LinearSolveError, NonlinearSolveError, FloatingPointError) as err:
+                self._log_cost_at_stop()
                 raise SimulationDiverged(f"step {self.step + 1}, t = {self.t:.6g} s → {self.t + dt:.6g} s: "
                                          f"{err}; "
                                          f"last good checkpoint: {self.out / 'checkpoint.h5'}") from err
@@ -120,6 +127,7 @@ class TimeLoop:
                 diag = self.model.diagnostics()
             problem = self.model.health(diag)
             if problem:
+                self._log_cost_at_stop()
                 raise SimulationDiverged(f"step {self.step}, t = {self.t:.6g} s: {problem}; "
                                          f"last good checkpoint: {self.out / 'checkpoint.h5'}")
             self.record(dt, diag)
