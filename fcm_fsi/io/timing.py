@@ -45,4 +45,3 @@ def peak_memory_line(comm) -> str:
     mine = peak_memory_mib()
     total, largest = comm.allreduce(mine, op=MPI.SUM), comm.allreduce(mine, op=MPI.MAX)
     return f"peak memory (max RSS) {total:.0f} MiB over {comm.size} rank(s), largest rank {largest:.0f} MiB"
-

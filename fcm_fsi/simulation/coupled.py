@@ -25,10 +25,11 @@ chain (cell-to-body split, depth scaling, DEM load application) to round-off.
 
 Added mass: the coupling is explicit (staggered), which is unstable once the added mass
 of a block exceeds about its own mass (a floating box: m_a ≈ 1.6 m). ``coupling.added_mass``
-= C_a raises the DEM inertia of every block by m̃ = C_a ρ̄_b V_b, ρ̄_b the mean fluid density
-on the block's wetted (cut) surface at this step, V_b the volume of the shape the fluid sees
-(a block widened by ``coupling.min_thickness`` drags the fluid of its widened shape along) (rotational inertia in the same ratio), and adds m̃ a (and Ĩ α) of the previous fluid step to the load, minus m̃ g so the
-weight is unchanged:  (m + m̃) aⁿ⁺¹ = F_fluid + m g + m̃ aⁿ. At a converged or steady motion
+= C_a raises the DEM inertia of every block by m̃ = C_a ρ̄_b V_b (rotational inertia in the
+same ratio), ρ̄_b the mean fluid density on the block's wetted (cut) surface at this step, V_b
+the volume of the shape the fluid sees (a block widened by ``coupling.min_thickness`` drags the
+fluid of its widened shape along), and adds m̃ a (and Ĩ α) of the previous fluid step to the
+load, minus m̃ g so the weight is unchanged:  (m + m̃) aⁿ⁺¹ = F_fluid + m g + m̃ aⁿ. At a converged or steady motion
 this is exact; in a transient it lags by one fluid step, O(Δt ȧ).
 """
 from __future__ import annotations
@@ -86,7 +87,6 @@ class CoupledModel:
 
         self.system = build_system(case.dem)
         self.dem = DEMSubcycler(self.system)
-        self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
         st = self.system.state
         self.nb = st.nb
         self._remember_own_inertia(case)
@@ -167,6 +167,7 @@ class CoupledModel:
             self.fluid.pf.volume0 = self.fluid.pf.volume()[0]
             self.water0 = self.comm.allreduce(fem.assemble_scalar(self._water_forms[0]), op=MPI.SUM)
             self.liquid0 = self._liquid_volume_fluid()
+        self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
         if self.bonds is not None:
             self.series_units["broken_bonds"] = "-"
         self.bodies_csv = None
@@ -250,9 +251,8 @@ class CoupledModel:
         bad = np.flatnonzero(thin < THIN_WALL * self.h_min)
         if bad.size:
             log.warning("%d block(s) are thinner than two cells in the fluid (thinnest %.3g m, smallest cell "
-                        "diameter %.3g m; "
-                        "blocks %s): walls thinner than about two cells let water through and their loads are "
-                        "spurious (docs/coupling.md, 'Thin walls'); refine the mesh there or raise "
+                        "diameter %.3g m; blocks %s): walls thinner than about two cells let water through and "
+                        "their loads are spurious (docs/coupling.md, 'Thin walls'); refine the mesh there or raise "
                         "coupling.min_thickness", bad.size, float(thin[bad].min()), self.h_min,
                         ", ".join(map(str, bad[:8])) + (" ..." if bad.size > 8 else ""))
 
