@@ -5,13 +5,17 @@ sub-steps each) keeps every run to a few seconds.
 """
 from __future__ import annotations
 
+import shutil
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 import yaml
 
 from fcm_fsi.config import ConfigError, case_from_dict
 
-from .conftest import ROOT, run_cli
+from .conftest import ROOT, mpi_env, run_cli
 
 
 def coarse_case(t_end: float = 0.06) -> dict:
@@ -215,3 +219,32 @@ def test_settling_sphere_reference_correlations():
     assert di_felice_wall_factor(12.9, 0.0) == 1.0
     assert di_felice_wall_factor(1e-9, 0.05) == pytest.approx((0.95 / (1 - 0.0165)) ** 3.3, rel=1e-8)
     assert di_felice_wall_factor(13.0, 0.05) > di_felice_wall_factor(1.0, 0.05)   # walls matter less at higher Re
+
+
+SPLIT_SCRIPT = """
+import time
+from mpi4py import MPI
+from fcm_fsi.verify.cases.coupled import split_for_runs, gather_runs
+comm = MPI.COMM_WORLD
+sub, mine = split_for_runs(comm, 3)
+if comm.rank == 1:
+    time.sleep(1.0)          # a slower group: the others wait for it
+res = gather_runs(comm, sub, {i: (i, sub.size, sub.allreduce(comm.rank)) for i in mine})
+if comm.rank == 0:
+    print(sorted(res.items()))
+"""
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("np_, expected", [
+    (1, [(0, (0, 1, 0)), (1, (1, 1, 0)), (2, (2, 1, 0))]),           # one group runs all three
+    (2, [(0, (0, 1, 0)), (1, (1, 1, 1)), (2, (2, 1, 0))]),           # rank 0: runs 0 and 2
+    (3, [(0, (0, 1, 0)), (1, (1, 1, 1)), (2, (2, 1, 2))]),           # one run per rank
+    (4, [(0, (0, 2, 3)), (1, (1, 1, 1)), (2, (2, 1, 2))])])          # ranks 0 and 3 share run 0
+def test_independent_runs_are_shared_out_over_rank_groups_and_gathered(np_, expected):
+    """verify's split_for_runs/gather_runs (block_overturn's three frictions side by side):
+    every run is done by exactly one group and every rank gets all results."""
+    cmd = [shutil.which("mpirun"), "-n", str(np_), sys.executable, "-c", SPLIT_SCRIPT]
+    res = subprocess.run(cmd, cwd=ROOT, env=mpi_env(), capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == str(expected)

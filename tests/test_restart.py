@@ -129,3 +129,17 @@ def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path, c
     # the cost so far is still reported (a diverged run used to end without its timing table)
     logger.removeHandler(caplog.handler)
     assert "stopped still_water after 0 steps" in caplog.text and "peak memory (max RSS)" in caplog.text
+
+
+def test_fingerprint_ignores_the_solver_choice_but_not_the_physics(root):
+    """A restart may switch the linear solver (e.g. to LU after ILU-GMRES broke down), which
+    changes the solution only at solver tolerance; a physical parameter may not change."""
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.io.checkpoint import case_fingerprint
+    path = root / "cases" / "dam_break.yaml"
+    base = case_fingerprint(load_case(path))
+    solver = ['fluid.petsc={"ksp_type": "gmres", "pc_type": "lu"}', "fluid.reuse_preconditioner=true",
+              'phase_field.petsc={"ksp_type": "preonly", "pc_type": "lu"}', "run.t_end=9.0"]
+    assert case_fingerprint(load_case(path, solver)) == base
+    assert case_fingerprint(load_case(path, ["fluid.density=1000.5"])) != base
+    assert case_fingerprint(load_case(path, ["fluid.rtol=1e-6"])) != base

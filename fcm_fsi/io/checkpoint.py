@@ -24,10 +24,16 @@ from ..config.loader import ConfigError, to_dict
 
 
 def case_fingerprint(case) -> str:
-    """Hash of the resolved case, ignoring what a restart may change (end time, cadence, output)."""
+    """Hash of the resolved case, ignoring what a restart may change: end time, cadence, output,
+    and how the linear systems are solved (``fluid.petsc``, ``fluid.reuse_preconditioner``,
+    ``phase_field.petsc`` — e.g. a direct solver after an iterative one broke down; they change
+    the solution only at solver tolerance)."""
     data = to_dict(case)
     for key in ("t_end", "log_every", "output_every", "checkpoint_every"):
         data["run"].pop(key, None)
+    for section, keys in (("fluid", ("petsc", "reuse_preconditioner")), ("phase_field", ("petsc",))):
+        for key in keys:
+            (data.get(section) or {}).pop(key, None)
     data.pop("output", None)
     data.pop("description", None)
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
