@@ -12,8 +12,8 @@ import pytest
 
 from fcm_fsi.config.dem import DEMConfig
 from fcm_fsi.config.loader import build
-from fcm_fsi.coupling.dem_side import (DEMSubcycler, fluid_thickness, fluid_volume_ratio, shapes_of_blocks,
-                                       substep_count)
+from fcm_fsi.coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thickness, fluid_volume_ratio,
+                                       shapes_of_blocks, substep_count)
 from fcm_fsi.dem.model import build_state, build_structure, build_system
 from fcm_fsi.dem.state import quat_to_matrix_np
 from fcm_fsi.fcm.levelset import BOX, SPHERE
@@ -183,6 +183,23 @@ def test_fluid_volume_ratio_is_the_widened_box_over_the_true_one():
     np.testing.assert_allclose(fluid_volume_ratio(cfg, st, 0.15, 3), [(0.15 / 0.12) * (0.15 / 0.08), 1.0])
     np.testing.assert_allclose(fluid_volume_ratio(cfg, st, 0.15, 2), [0.15 / 0.12, 1.0])
     np.testing.assert_allclose(fluid_volume_ratio(cfg, st, 0.0, 3), [1.0, 1.0])
+
+
+def test_fluid_gyration_ratio_is_the_widened_box_over_the_true_one_about_each_principal_axis():
+    """Box 0.2 × 0.12 × 0.08 (its body axes x, y, z here: I/m = (b² + c²)/12, …) widened to
+    0.15: squared gyration radii (0.15² + 0.15²)/(0.12² + 0.08²) about x, (0.2² + 0.15²)/
+    (0.2² + 0.08²) about y, (0.2² + 0.15²)/(0.2² + 0.12²) about z; in 2D the 0.08 m depth
+    stays; a sphere block and no widening give 1."""
+    cfg = dem_config([box_block(), free_sphere(position=[0.5, 0.0, 0.0])])
+    st = build_state(cfg)
+    np.testing.assert_allclose(st.inertia[0] / st.mass[0] * 12.0, [0.12**2 + 0.08**2, 0.2**2 + 0.08**2, 0.2**2 + 0.12**2])
+    np.testing.assert_allclose(fluid_gyration_ratio(cfg, st, 0.15, 3),
+                               [[2 * 0.15**2 / (0.12**2 + 0.08**2), (0.2**2 + 0.15**2) / (0.2**2 + 0.08**2),
+                                 (0.2**2 + 0.15**2) / (0.2**2 + 0.12**2)], [1.0, 1.0, 1.0]])
+    np.testing.assert_allclose(fluid_gyration_ratio(cfg, st, 0.15, 2),
+                               [[(0.15**2 + 0.08**2) / (0.12**2 + 0.08**2), 1.0, (0.2**2 + 0.15**2) / (0.2**2 + 0.12**2)],
+                                [1.0, 1.0, 1.0]])
+    np.testing.assert_allclose(fluid_gyration_ratio(cfg, st, 0.0, 3), np.ones((2, 3)))
 
 
 def test_fluid_thickness_is_the_thinnest_widened_extent():

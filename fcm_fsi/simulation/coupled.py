@@ -25,10 +25,11 @@ chain (cell-to-body split, depth scaling, DEM load application) to round-off.
 
 Added mass: the coupling is explicit (staggered), which is unstable once the added mass
 of a block exceeds about its own mass (a floating box: m_a ≈ 1.6 m). ``coupling.added_mass``
-= C_a raises the DEM inertia of every block by m̃ = C_a ρ̄_b V_b (rotational inertia in the
-same ratio), ρ̄_b the mean fluid density on the block's wetted (cut) surface at this step, V_b
+= C_a raises the DEM inertia of every block by m̃ = C_a ρ̄_b V_b (rotational inertia by
+Ĩ = C_a ρ̄_b V_b k_b², k_b the radius of gyration of that shape about each principal axis),
+ρ̄_b the mean fluid density on the block's wetted (cut) surface at this step, V_b
 the volume of the shape the fluid sees (a block widened by ``coupling.min_thickness`` drags the
-fluid of its widened shape along), and adds m̃ a (and Ĩ α) of the previous fluid step to the
+fluid of its widened shape along, at its larger lever arms), and adds m̃ a (and Ĩ α) of the previous fluid step to the
 load, minus m̃ g so the weight is unchanged:  (m + m̃) aⁿ⁺¹ = F_fluid + m g + m̃ aⁿ. At a converged or steady motion
 this is exact; in a transient it lags by one fluid step, O(Δt ȧ).
 """
@@ -45,7 +46,8 @@ from petsc4py import PETSc
 
 from ..config.case import Case
 from ..config.loader import ConfigError
-from ..coupling.dem_side import DEMSubcycler, fluid_thickness, fluid_volume_ratio, gap_walls, shapes_of_blocks
+from ..coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thickness, fluid_volume_ratio, gap_walls,
+                                 shapes_of_blocks)
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain
 from ..fcm.levelset import StructureLevelSet
@@ -192,13 +194,18 @@ class CoupledModel:
 
     def _remember_own_inertia(self, case: Case) -> None:
         """Each block's own mass and inertia, its volume as the fluid sees it V_b = m_b/ρ_material
-        × the ``min_thickness`` widening (``fluid_volume_ratio``), and the fluid density field
+        × the ``min_thickness`` widening (``fluid_volume_ratio``), the rotational inertia per
+        unit mass of that shape (I/m × ``fluid_gyration_ratio``), and the fluid density field
         whose wetted mean gives ρ̄_b, for :meth:`_update_added_mass`."""
         st = self.system.state
         self.mass0, self.inertia0 = st.mass.copy(), st.inertia.copy()
         dens = np.array([m.density for m in case.dem.materials])
         self.volume_b = (st.mass / dens[st.sph_material[st.blk_sph_start[:-1]]]
                          * fluid_volume_ratio(case.dem, st, case.coupling.min_thickness, self.gdim))
+        with np.errstate(invalid="ignore", divide="ignore"):   # fixed blocks: no added mass
+            k2 = self.inertia0 / self.mass0[:, None] * fluid_gyration_ratio(case.dem, st, case.coupling.min_thickness,
+                                                                            self.gdim)
+        self.gyration_sq = np.where(np.isfinite(k2), k2, 0.0)
         self._rho_field = (self.fluid.rho if hasattr(self.fluid, "rho")
                            else fem.Constant(self.mesh, float(case.fluid.density)))
 
@@ -207,7 +214,8 @@ class CoupledModel:
         surface, so a block in air carries C_a ρ_air V_b, not the water's (with the water's,
         the lagged m̃ aⁿ term turned floor-contact chatter into a load of several times the
         weight of a block resting in air); 0 for blocks without cut surface and fixed blocks.
-        Raises the DEM mass and inertia (I m̃/m) for the coming sub-steps."""
+        Raises the DEM mass and inertia (by Ĩ = m̃ k², k the fluid-seen shape's radius of
+        gyration) for the coming sub-steps."""
         ca = self.case.coupling.added_mass
         if ca == 0.0:
             return
@@ -218,11 +226,11 @@ class CoupledModel:
         extra[st.fixed] = 0.0
         self.added_mass = extra
         st.mass[:] = self.mass0 + extra
-        st.inertia[:] = self.inertia0 * (1.0 + extra / self.mass0)[:, None]
+        st.inertia[:] = self.inertia0 + extra[:, None] * self.gyration_sq
 
     def _stabilised_load(self) -> tuple[np.ndarray, np.ndarray]:
         """Fluid load (relaxed: ω F + (1 − ω) × the last relaxed load) + m̃ aⁿ − m̃ g and
-        torque + R Ĩ Rᵀ αⁿ (body-frame Ĩ = I m̃/(m + m̃))."""
+        torque + R Ĩ Rᵀ αⁿ (body-frame Ĩ = m̃ k², see :meth:`_update_added_mass`)."""
         w = self.case.coupling.force_relaxation
         if w < 1.0:
             self.relaxed_load[:] = w * np.concatenate([self.force, self.torque]) + (1.0 - w) * self.relaxed_load
@@ -235,7 +243,7 @@ class CoupledModel:
         g = np.asarray(self.case.dem.gravity)
         F = force + self.added_mass[:, None] * (self.accel - g[None, :])
         R = st.rotation_matrices()
-        I_tilde = self.inertia0 * (self.added_mass / self.mass0)[:, None]
+        I_tilde = self.added_mass[:, None] * self.gyration_sq
         body = np.einsum("bji,bj->bi", R, self.alpha_ang) * I_tilde
         T = torque + np.einsum("bij,bj->bi", R, body)
         return F, T
