@@ -187,6 +187,34 @@ def cut_domain(gdim: int, n: int, cutoff: float = 0.2) -> tuple[CutDomain, np.nd
     return cut, level
 
 
+def test_shared_ownership_moves_load_between_close_bodies_and_keeps_the_total():
+    """``coupling.load_split: shared`` at the cut level: the two bodies of ``cut_domain``
+    are 0.03 m apart on a 0.05 m mesh; with the share weight ½ − (d₂ − d₁)/(2h) from the
+    level set's second owner and margin, cells near the gap give part of their value to the
+    other body, the sum over bodies is that of the plain ownership, a far-away body's share
+    is 0, and the wetted mean of a constant is still exact on both bodies."""
+    cut, level = cut_domain(2, 20)
+    shapes, pos, quat = two_bodies(2)
+    ls = StructureLevelSet(shapes, 2, 0.2)
+    level, owner = ls.evaluate(cut.nodes, pos, quat)
+    own = cut.n_owned
+    ones = np.ones((own, 2))
+    plain = cut._to_bodies(ones, 2)
+    w = np.clip(0.5 - ls.owner_margin / (2 * 0.05), 0.0, 0.5)
+    cut.update(level, owner, np.zeros((len(level), 2)), (ls.second_owner, w))
+    shared = cut._to_bodies(ones, 2)
+    assert np.allclose(shared.sum(axis=0), plain.sum(axis=0), rtol=1e-14)
+    assert np.all(cut.cell_share <= 0.5) and cut.cell_share.max() > 0.1       # the gap cells share
+    w_own = cut.cell_share[:own]
+    for a in (0, 1):                                                          # both ways across the gap
+        to_other = (cut.cell_owner[:own] == a) & (w_own > 0)
+        assert to_other.any() and np.all(cut.cell_second[:own][to_other] == 1 - a)
+    gained = w_own[cut.cell_owner[:own] == 1].sum() - w_own[cut.cell_owner[:own] == 0].sum()
+    np.testing.assert_allclose(shared[0, 0] - plain[0, 0], gained, rtol=1e-12)
+    x = ufl.SpatialCoordinate(cut.mesh)
+    assert np.allclose(cut.wetted_mean(2, 2.0 + 0.0 * x[0]), 2.0, rtol=1e-12)
+
+
 def test_wetted_mean_is_the_surface_average_per_body():
     """Per-body mean over the cut surface: a constant comes back exactly on both bodies, a
     body that does not cut the mesh gets NaN, and a field that differs between the bodies'

@@ -213,6 +213,27 @@ def test_union_of_overlapping_shapes_is_the_minimum():
     np.testing.assert_array_equal(owner, [0, -1, 0])
 
 
+def test_second_owner_and_margin_are_the_nearest_other_body_and_its_extra_distance():
+    """Two overlapping boxes of bodies 0 and 1 (0: x ∈ [−0.2, 0.2], 1: x ∈ [0.1, 0.5], both
+    |y|, |z| ≤ 0.1) and a static sphere far off: along y = z = 0 the second owner is the other
+    box and the margin the difference of the two signed distances (brute force per box); a
+    point with only one body within reach has no second owner (−2) and margin = cutoff."""
+    boxes = [Shapes.box((0, 0, 0), (0.4, 0.2, 0.2), body=0), Shapes.box((0.3, 0, 0), (0.4, 0.2, 0.2), body=0)]
+    shapes = Shapes.concat([boxes[0], Shapes.box((0.3, 0, 0), (0.4, 0.2, 0.2), body=1),
+                            Shapes.sphere((5.0, 5.0, 5.0), 0.1)])
+    x = np.column_stack([np.linspace(-0.3, 0.6, 37), np.zeros(37), np.zeros(37)])
+    rest = (np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)))
+    ls = StructureLevelSet(shapes, 2, 1.0)
+    phi, owner = ls.evaluate(x, *rest)
+    d = np.column_stack([signed_distance_reference(x, b, rest[0][:1], rest[1][:1], 1.0)[0] for b in boxes])
+    np.testing.assert_array_equal(owner, np.argmin(d, axis=1))
+    np.testing.assert_array_equal(ls.second_owner, 1 - np.argmin(d, axis=1))
+    np.testing.assert_allclose(ls.owner_margin, np.abs(d[:, 0] - d[:, 1]), atol=1e-14)
+    near = StructureLevelSet(shapes, 2, 0.05)
+    _, owner = near.evaluate(np.array([[-0.24, 0.0, 0.0]]), *rest)
+    assert owner[0] == 0 and near.second_owner[0] == -2 and near.owner_margin[0] == 0.05
+
+
 def test_no_shapes_and_invalid_input():
     phi, owner = evaluate(Shapes.concat([]), np.zeros((4, 3)), cutoff=0.1)
     np.testing.assert_array_equal(phi, 0.1)

@@ -28,6 +28,12 @@ class CouplingConfig:
         "end", doc="block velocity the fluid's wall condition gets for the next step: end = v, ω at the end of the "
                    "DEM sub-steps; mean = their mean over the sub-steps (the displacement / Δt_f), which does not "
                    "alias vibrations of bonded blocks far faster than the fluid step into the fluid (docs/tsunami.md)")
+    load_split: Literal["owner", "shared"] = param(
+        "owner", doc="which block a cut cell's load (and a node's wall velocity) belongs to: owner = the block its "
+                     "deepest vertex is deepest in; shared = where a second block's shape is within one cell (the "
+                     "smallest, h) of as deep, the two share it, the second's weight ½ − (d₂ − d₁)/(2h) ≥ 0 — continuous where "
+                     "widened shapes overlap and blocks turn, where owner jumps between bonded neighbours every "
+                     "step (docs/tsunami.md, session 14)")
     cut_extension: float = param(
         1.0, doc="β of the cut-cell extension: the solid part of every cut cell carries a Brinkman term "
                  "β ρ/Δt (u − ū) (its reaction is part of the block load) and β × the PSPG term, so nodes with "

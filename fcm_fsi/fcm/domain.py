@@ -142,6 +142,7 @@ class CutDomain:
         self.level_dofs = self.node_map(self.S1)
         self.wall_dofs = self.node_map(self.V1)
         self.cell_owner = np.full(ncells, -2, np.int64)
+        self.cell_second, self.cell_share = np.full(ncells, -2, np.int64), np.zeros(ncells)
         self.body_cells = np.zeros(ncells, bool)
         self.fluid_measure = np.zeros(ncells)
         self.surface_measure = np.zeros(ncells)
@@ -168,10 +169,13 @@ class CutDomain:
         """Mesh vertex coordinates (n, 3) [m] where the level set is given (this rank, incl. ghosts)."""
         return self.mesh.geometry.x
 
-    def update(self, level: np.ndarray, owner: np.ndarray, wall_velocity: np.ndarray) -> CutStatistics:
+    def update(self, level: np.ndarray, owner: np.ndarray, wall_velocity: np.ndarray,
+               share: tuple[np.ndarray, np.ndarray] | None = None) -> CutStatistics:
         """New cut from the level set at :attr:`nodes` (> 0 fluid), the owning body of each
         node (int, < 0 for none/static) and the wall velocity ū at each node (n, gdim).
-        Local work only, except the statistics (one allreduce)."""
+        ``share`` = (second body, its weight in [0, ½]) at each node: a cell's load then goes
+        to the two bodies of its deepest vertex in those proportions (default: all to the
+        owner). Local work only, except the statistics (one allreduce)."""
         values = np.ascontiguousarray(level[self.geom_cells])
         cv, cs, self.fluid_measure, self.surface_measure = fitted_weights(
             self.cell_coords, values, self.ref_points, self.ref_weights)
@@ -187,6 +191,12 @@ class CutDomain:
         deepest = np.argmin(values, axis=1)
         rows = np.arange(len(values))
         self.cell_owner = owner[self.geom_cells[rows, deepest]]
+        if share is None:
+            self.cell_second, self.cell_share = np.full_like(self.cell_owner, -2), np.zeros(len(rows))
+        else:
+            self.cell_second = share[0][self.geom_cells[rows, deepest]]
+            self.cell_share = np.where((self.cell_second >= 0) & (self.cell_owner >= 0),
+                                       share[1][self.geom_cells[rows, deepest]], 0.0)
         self.body_cells = values[rows, deepest] <= 0     # cells at (cut or touching Γ) or inside a body
         return self.statistics(values)
 
@@ -310,18 +320,12 @@ class CutDomain:
             self._build_force_forms()
         fF, fM, dofs_f, dofs_m = self._force_forms
         own = self.n_owned
-        owner = self.cell_owner[:own]
-        mask = owner >= 0
         vf = fem.petsc.assemble_vector(fF)      # no ghost accumulation: DG0 dofs are cell-local
         vm = fem.petsc.assemble_vector(fM)
-        fc = vf.array.reshape(-1, self.gdim)[dofs_f[:own]][mask]
         nm = 1 if self.gdim == 2 else 3
-        mc = vm.array.reshape(-1, nm)[dofs_m[:own]][mask]
+        force = self._to_bodies(vf.array.reshape(-1, self.gdim)[dofs_f[:own]], nbodies)
+        moment = self._to_bodies(vm.array.reshape(-1, nm)[dofs_m[:own]], nbodies)
         vf.destroy(), vm.destroy()
-        force = np.zeros((nbodies, self.gdim))
-        moment = np.zeros((nbodies, nm))
-        np.add.at(force, owner[mask], fc)
-        np.add.at(moment, owner[mask], mc)
         force = self.comm.allreduce(force, op=MPI.SUM)
         moment = self.comm.allreduce(moment, op=MPI.SUM)
         c = np.asarray(centres, dtype=float).reshape(nbodies, -1)
@@ -331,6 +335,19 @@ class CutDomain:
         else:
             torque[:] = moment - np.cross(c[:, :3], force)
         return force, torque
+
+    def _to_bodies(self, cellwise: np.ndarray, nbodies: int) -> np.ndarray:
+        """Sum owned-cell values (n_owned, k) per body (nbodies, k) by the cell ownership of
+        :meth:`update` (owner, and the shared part to the second body); cells of no body or
+        of static shapes count for none. Local."""
+        own = self.n_owned
+        owner, second, w = self.cell_owner[:own], self.cell_second[:own], self.cell_share[:own]
+        out = np.zeros((nbodies,) + cellwise.shape[1:])
+        mask = owner >= 0
+        np.add.at(out, owner[mask], cellwise[mask] * (1.0 - w[mask]).reshape((-1,) + (1,) * (cellwise.ndim - 1)))
+        shared = mask & (w > 0)
+        np.add.at(out, second[shared], cellwise[shared] * w[shared].reshape((-1,) + (1,) * (cellwise.ndim - 1)))
+        return out
 
     def wetted_mean(self, nbodies: int, value) -> np.ndarray:
         """Mean of a scalar field over each body's cut surface, (nbodies,); NaN for a body
@@ -344,12 +361,10 @@ class CutDomain:
             self._wetted_value = value
         f_val, f_area, dofs = self._wetted_forms
         own = self.n_owned
-        owner = self.cell_owner[:own]
-        mask = owner >= 0
         sums = np.zeros((2, nbodies))
         for k, form in enumerate((f_val, f_area)):
             vec = fem.petsc.assemble_vector(form)
-            np.add.at(sums[k], owner[mask], vec.array[dofs[:own]][mask])
+            sums[k] = self._to_bodies(vec.array[dofs[:own]], nbodies)
             vec.destroy()
         sums = self.comm.allreduce(sums, op=MPI.SUM)
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -265,9 +265,11 @@ def _point_cell(x, lo, dims, cell):
 
 @numba.njit(cache=True, parallel=True)
 def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, start, items,
-              planes, gap, phi, owner, on_wall):
+              planes, gap, phi, owner, on_wall, second, margin):
     """Clipped union distance φ and owner body at every point; returns the number of
-    (point, primitive) candidates read from the bins (the search cost).
+    (point, primitive) candidates read from the bins (the search cost). ``second`` and
+    ``margin`` get the nearest other owner (bodies and static shapes, not the walls) and how
+    much farther it is, d₂ − d₁ ≥ 0 (``cutoff`` where there is none).
 
     With ``gap`` > 0 the fluid between two different owners (bodies, the static shapes, or
     the walls ``planes`` (np, 6) = point, unit normal into the fluid) is filled where the two
@@ -300,11 +302,12 @@ def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, st
                 if d < best:
                     best = d
                     arg = s
-                if gap > 0.0:
-                    d1, o1, d2, o2 = _two_nearest(d, body[s], d1, o1, d2, o2)
+                d1, o1, d2, o2 = _two_nearest(d, body[s], d1, o1, d2, o2)
             tests += start[c + 1] - start[c]
         phi[i] = max(best, -cutoff)
         owner[i] = NO_SHAPE if arg < 0 else body[arg]
+        second[i] = o2
+        margin[i] = d2 - d1 if o2 != NO_SHAPE else cutoff
         if gap > 0.0 and arg >= 0:
             for w in range(planes.shape[0]):
                 d = ((x[i, 0] - planes[w, 0]) * planes[w, 3] + (x[i, 1] - planes[w, 1]) * planes[w, 4]
@@ -362,6 +365,7 @@ class StructureLevelSet:
         self.pair_tests = 0
         self.bin_entries = 0
         self.on_wall = np.zeros(0, bool)
+        self.second_owner, self.owner_margin = np.zeros(0, np.int64), np.zeros(0)
 
     def evaluate(self, x: np.ndarray, body_pos: np.ndarray, body_quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """φ and owner at the points ``x`` (n, 3) [m] (2D meshes pass z = 0).
@@ -371,6 +375,8 @@ class StructureLevelSet:
         to [−cutoff, cutoff], and owner (n,) int64: the body of the primitive attaining the
         minimum (−1 static), −2 where no primitive is closer than the cutoff. With a gap fill,
         ``self.on_wall`` (n,) marks the filled points between a body and a wall afterwards.
+        ``self.second_owner`` (n,) and ``self.owner_margin`` (n,) [m] are the nearest other
+        owner and how much farther its shapes are (for ``coupling.load_split: shared``).
         """
         x = np.ascontiguousarray(x, np.float64)
         body_pos = np.ascontiguousarray(body_pos, np.float64).reshape(self.nbodies, 3)
@@ -380,6 +386,8 @@ class StructureLevelSet:
         phi = np.full(x.shape[0], self.cutoff)
         owner = np.full(x.shape[0], NO_SHAPE, np.int64)
         self.on_wall = np.zeros(x.shape[0], bool)
+        self.second_owner = np.full(x.shape[0], NO_SHAPE, np.int64)
+        self.owner_margin = np.full(x.shape[0], self.cutoff)
         self.pair_tests = self.bin_entries = 0
         if not len(self.shapes):
             return phi, owner
@@ -389,7 +397,7 @@ class StructureLevelSet:
         start, items = _bin_shapes(centre, self._reach, lo, dims, cell)
         self.pair_tests = _evaluate(x, s.kind, s.body, s.half, self._radius, centre, R, self.cutoff,
                                     lo, dims, cell, start, items, self.walls, self.gap, phi, owner,
-                                    self.on_wall)
+                                    self.on_wall, self.second_owner, self.owner_margin)
         self.bin_entries = items.shape[0]
         return phi, owner
 

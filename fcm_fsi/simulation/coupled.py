@@ -295,16 +295,40 @@ class CoupledModel:
             v = velocities.reshape(2 * self.nb, 3)
             ubar = rigid_body_velocity(st.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None],
                                        self.points, owner)[:, : self.gdim]
+        share = None
+        if self.case.coupling.load_split == "shared":
+            share = self._shared_ownership(owner, velocities, ubar)
         ubar[self.levelset.on_wall] = 0.0      # the gap fill between a block and a wall rests with the wall
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
-        stats = self.cut.update(level, owner, ubar)
+        stats = self.cut.update(level, owner, ubar, share)
         if self._advective_dofs is not None:
             # φ in advective form on the cells at and inside the blocks (phase_field_residual)
             self.fluid.pf.advective_cells.x.array[self._advective_dofs] = self.cut.body_cells
             # the volume correction holds the liquid of the fluid part
             self.fluid.pf.interface_cell_weights = self.cut.fluid_fractions()
         return stats
+
+    def _shared_ownership(self, owner: np.ndarray, velocities, ubar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``coupling.load_split: shared``: at each node the nearest other block (second owner)
+        and its weight w = max(0, ½ − (d₂ − d₁)/(2 h)), h = h_min the smallest cell diameter, d₁,
+        d₂ the two blocks' signed distances; blends ū in place to (1 − w) ū₁ + w ū₂, so load and
+        wall velocity are continuous where two blocks' shapes overlap or nearly touch."""
+        second = self.levelset.second_owner
+        w = np.clip(0.5 - self.levelset.owner_margin / (2.0 * self.h_min), 0.0, 0.5)
+        w = np.where((second >= 0) & (owner >= 0), w, 0.0)
+        blend = w > 0
+        if blend.any():
+            if velocities is None:
+                u2 = self.dem.rigid_velocity(self.points[blend], second[blend],
+                                             mean=self.case.coupling.wall_velocity == "mean")
+            else:
+                from ..coupling.dem_side import rigid_body_velocity
+                v = velocities.reshape(2 * self.nb, 3)
+                u2 = rigid_body_velocity(self.system.state.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None],
+                                         self.points[blend], second[blend])
+            ubar[blend] = (1.0 - w[blend, None]) * ubar[blend] + w[blend, None] * u2[:, : self.gdim]
+        return second, w
 
     def fluid_part_density(self, rho, rho_cell) -> None:
         """Cell-mean ρ of the PSPG test function over the cell's (weighted) fluid part, not
