@@ -72,6 +72,10 @@ def test_floating_box_exchanges_momentum_and_restarts(tmp_path):
     assert r["t"][-1] == pytest.approx(s["t"][-1])
     assert abs(r["b0_y"][-1] - s["b0_y"][-1]) < 1e-12
     assert abs(r["b0_vy"][-1] - s["b0_vy"][-1]) < 1e-10
+    # bodies.csv continues across the restart: the rows before it kept, none repeated
+    bf, bh = read(tmp_path / "full" / "bodies.csv"), read(tmp_path / "half" / "bodies.csv")
+    np.testing.assert_allclose(bh["t"], bf["t"], rtol=1e-12)
+    np.testing.assert_allclose(bh["y"], bf["y"], rtol=0, atol=1e-12)
 
 
 @pytest.mark.mpi

@@ -143,3 +143,31 @@ def test_fingerprint_ignores_the_solver_choice_but_not_the_physics(root):
     assert case_fingerprint(load_case(path, solver)) == base
     assert case_fingerprint(load_case(path, ["fluid.density=1000.5"])) != base
     assert case_fingerprint(load_case(path, ["fluid.rtol=1e-6"])) != base
+
+
+def test_series_csv_resumes_at_the_checkpoint_time(tmp_path):
+    """A restart keeps the rows up to the checkpoint and drops those an earlier run wrote
+    after it before stopping (they are computed again); a lazy series is created at its
+    first row or at close, so its owner can learn of the restart after building it."""
+    from fcm_fsi.io.csv import TimeSeriesCSV
+    path = tmp_path / "s.csv"
+    first = TimeSeriesCSV(path, {"step": "-", "t": "s", "x": "m"})
+    for k in range(6):
+        first.write(step=k, t=0.1 * k, x=k * k)
+    first.close()
+    again = TimeSeriesCSV(path, {"step": "-", "t": "s", "x": "m"}, append=True, resume_at=0.3)
+    again.write(step=4, t=0.4, x=-1.0)
+    again.close()
+    rows = np.loadtxt(path, delimiter=",", skiprows=1)
+    np.testing.assert_allclose(rows[:, 1], [0.0, 0.1, 0.2, 0.3, 0.4])
+    assert rows[-1, 2] == -1.0 and path.read_text().startswith("step [-],t [s],x [m]\n")
+    lazy = TimeSeriesCSV(path, {"step": "-", "t": "s", "x": "m"}, lazy=True)
+    lazy.resume(0.1)
+    lazy.write(step=2, t=0.2, x=7.0)
+    np.testing.assert_allclose(np.loadtxt(path, delimiter=",", skiprows=1)[:, 2], [0.0, 1.0, 7.0])
+    empty = TimeSeriesCSV(tmp_path / "e.csv", {"t": "s"}, lazy=True)
+    assert not (tmp_path / "e.csv").exists()
+    empty.close()
+    assert (tmp_path / "e.csv").read_text() == "t [s]\n"
+    empty.write(t=1.0)                                    # after close: ignored, not a new file
+    assert (tmp_path / "e.csv").read_text() == "t [s]\n"

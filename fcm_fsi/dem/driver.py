@@ -38,15 +38,6 @@ def _substeps(run_dt: float, dem_dt: float) -> int:
         raise ConfigError(f"key 'run.dt' / 'dem.dt': {err}") from None
 
 
-def _truncate_csv(path: Path, t_max: float) -> None:
-    """Drop rows written after the checkpoint time (a restart re-writes them)."""
-    if not path.exists():
-        return
-    lines = path.read_text().splitlines(keepends=True)
-    keep = lines[:1] + [ln for ln in lines[1:] if float(ln.split(",", 1)[0]) <= t_max * (1 + 1e-12)]
-    path.write_text("".join(keep))
-
-
 def fd_columns(n: int) -> dict[str, str]:
     cols = {"t": "s"}
     for i in range(n):
@@ -78,14 +69,12 @@ def run_dem_case(case, out_dir: Path, comm, restart: str | None) -> None:
         n_out = int(extra.get("n_out", 0))
         pvd_entries = [(float(t), f"spheres_{i:05d}.vtp") for i, t in enumerate(extra.get("out_times", []))]
         log.info("restarted from %s at t = %.6g s (DEM step %d)", restart, st.t, st.step)
-        if rank == 0:
-            _truncate_csv(out_dir / "dem_energy.csv", st.t)
-            _truncate_csv(out_dir / "dem_force_displacement.csv", st.t)
-    append = restart is not None
-    energy = TimeSeriesCSV(out_dir / "dem_energy.csv", COLUMNS, rank, append=append)
+    # a restart keeps the rows up to the checkpoint and drops the later ones (written again)
+    resume = dict(append=True, resume_at=st.t) if restart is not None else {}
+    energy = TimeSeriesCSV(out_dir / "dem_energy.csv", COLUMNS, rank, **resume)
     ctrl = system.controls
     fd = TimeSeriesCSV(out_dir / "dem_force_displacement.csv", fd_columns(len(ctrl.items)), rank,
-                       append=append) if ctrl is not None else None
+                       **resume) if ctrl is not None else None
     log.info("DEM: %d blocks, %d spheres, %d materials, dt = %.4g s, %d DEM steps per outer step %.4g s",
              st.nb, st.ns, len(cfg.materials), cfg.dt, nsub, run.dt)
 

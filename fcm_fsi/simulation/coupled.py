@@ -181,12 +181,13 @@ class CoupledModel:
                               ("wy", "rad/s"), ("wz", "rad/s"), ("fx", "N"), ("fy", "N"), ("fz", "N"),
                               ("tx", "N m"), ("ty", "N m"), ("tz", "N m")):
                 cols[key] = unit
-            self.bodies_csv = TimeSeriesCSV(Path(out_dir) / "bodies.csv", cols, comm.rank, append=False)
+            self.bodies_csv = TimeSeriesCSV(Path(out_dir) / "bodies.csv", cols, comm.rank, lazy=True)
         self.breaks_csv = None
         if out_dir is not None and self.bonds is not None:
             from ..io.csv import TimeSeriesCSV
             self.breaks_csv = TimeSeriesCSV(Path(out_dir) / "bond_breaks.csv",
-                                            {"t": "s", "bond": "-", "block_a": "-", "block_b": "-"}, comm.rank)
+                                            {"t": "s", "bond": "-", "block_a": "-", "block_b": "-"}, comm.rank,
+                                            lazy=True)
             self._broken_before = self.bonds.broken_bonds()
         log.info("coupled: %d blocks, %d spheres; DEM dt %.4g s; level-set band %.4g m, gap fill %.4g m "
                  "(%d walls); cut cells %d, smallest cut fraction %.2e", self.nb, st.ns, self.system.dt, self.band,
@@ -673,4 +674,9 @@ class CoupledModel:
     def load_state(self, checkpoint) -> None:
         self.fluid.load_state(checkpoint)
         self.load_dem_arrays(checkpoint.globals)
+        for csv in (self.bodies_csv, self.breaks_csv):     # continue the earlier run's files
+            if csv is not None:
+                csv.resume(checkpoint.time)
+        if self.bonds is not None:                         # bonds broken before the checkpoint are not new
+            self._broken_before = self.bonds.broken_bonds()
         self.stats = self.rebuild_cut()

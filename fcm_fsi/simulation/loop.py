@@ -80,7 +80,7 @@ class TimeLoop:
             self.step, self.t = ck.step, ck.time
             log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)
         self.series = TimeSeriesCSV(self.out / "series.csv", {"step": "-", "t": "s", "dt": "s", **model.series_units},
-                                    comm.rank, append=bool(restart))
+                                    comm.rank, append=bool(restart), resume_at=self.t if restart else None)
         self.fields = None
         if case.output.xdmf:
             name = "fields.xdmf" if not restart else f"fields_from_step{self.step}.xdmf"
