@@ -288,14 +288,7 @@ class CoupledModel:
         unknown of :meth:`_block_velocities`)."""
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
-        if velocities is None:
-            ubar = self.dem.rigid_velocity(self.points, owner, mean=self.case.coupling.wall_velocity == "mean")
-            ubar = ubar[:, : self.gdim]
-        else:
-            from ..coupling.dem_side import rigid_body_velocity
-            v = velocities.reshape(2 * self.nb, 3)
-            ubar = rigid_body_velocity(st.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None],
-                                       self.points, owner)[:, : self.gdim]
+        ubar = self._rigid_velocity(self.points, owner, velocities)
         share = None
         if self.case.coupling.load_split == "shared":
             share = self._shared_ownership(owner, velocities, ubar)
@@ -320,16 +313,21 @@ class CoupledModel:
         w = np.where((second >= 0) & (owner >= 0), w, 0.0)
         blend = w > 0
         if blend.any():
-            if velocities is None:
-                u2 = self.dem.rigid_velocity(self.points[blend], second[blend],
-                                             mean=self.case.coupling.wall_velocity == "mean")
-            else:
-                from ..coupling.dem_side import rigid_body_velocity
-                v = velocities.reshape(2 * self.nb, 3)
-                u2 = rigid_body_velocity(self.system.state.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None],
-                                         self.points[blend], second[blend])
-            ubar[blend] = (1.0 - w[blend, None]) * ubar[blend] + w[blend, None] * u2[:, : self.gdim]
+            u2 = self._rigid_velocity(self.points[blend], second[blend], velocities)
+            ubar[blend] = (1.0 - w[blend, None]) * ubar[blend] + w[blend, None] * u2
         return second, w
+
+    def _rigid_velocity(self, points: np.ndarray, owner: np.ndarray, velocities=None) -> np.ndarray:
+        """Wall velocity (n, gdim) [m/s] at ``points`` of the blocks ``owner`` (0 where < 0): from
+        the DEM's v, ω (``coupling.wall_velocity``) or from ``velocities``, the iterated unknown."""
+        if velocities is None:
+            u = self.dem.rigid_velocity(points, owner, mean=self.case.coupling.wall_velocity == "mean")
+        else:
+            from ..coupling.dem_side import rigid_body_velocity
+            v = velocities.reshape(2 * self.nb, 3)
+            u = rigid_body_velocity(self.system.state.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None],
+                                    points, owner)
+        return u[:, : self.gdim]
 
     def fluid_part_density(self, rho, rho_cell) -> None:
         """Cell-mean ρ of the PSPG test function over the cell's (weighted) fluid part, not
