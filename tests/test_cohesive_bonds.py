@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from fcm_fsi.dem.builder import assemble
-from fcm_fsi.dem.cohesive import CohesiveLaw
+from fcm_fsi.dem.cohesive import CohesiveBonds, CohesiveLaw
 from fcm_fsi.dem.state import quat_to_matrix_np
 
 SC, DF = 1.0e7, 0.02
@@ -157,3 +157,16 @@ def test_free_vibration_on_the_dem_stepper_conserves_the_ledger():
     assert led["spring"] > 0.05 * led["kinetic_trans"]  # the bonds do work
     assert bonds.lam_max.max() > 0.05 and not bonds.broken.any()
     assert led["balance_rel"] < 1e-5
+
+
+def test_block_damage_is_the_fraction_of_a_blocks_bonds_that_broke():
+    """Blocks 0–1–2 in a row, bond 0 (0, 1) and bond 1 (1, 2) of two points each, block 3
+    unbonded: break both points of bond 1 → damage 0, ½, 1, 0; one point of bond 0 broken
+    leaves that bond (and the damage) intact."""
+    law = CohesiveLaw(sigma_c=SC, delta_f=DF, delta_tc=DF, penalty_factor=1.0, mode="reversible")
+    z = np.zeros((4, 3))
+    bonds = CohesiveBonds(law, pt_bond=[0, 0, 1, 1], pt_a=[0, 0, 1, 1], pt_b=[1, 1, 2, 2], pt_ra=z, pt_rb=z,
+                          pt_na=z, pt_area=np.ones(4), bond_area=np.full(2, 2.0))
+    np.testing.assert_array_equal(bonds.block_damage(4), [0.0, 0.0, 0.0, 0.0])
+    bonds.broken[[0, 2, 3]] = True
+    np.testing.assert_allclose(bonds.block_damage(4), [0.0, 0.5, 1.0, 0.0])

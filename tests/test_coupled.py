@@ -252,3 +252,29 @@ def test_independent_runs_are_shared_out_over_rank_groups_and_gathered(np_, expe
     res = subprocess.run(cmd, cwd=ROOT, env=mpi_env(), capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == str(expected)
+
+
+def test_blocks_are_written_for_paraview_and_the_collection_continues_after_a_restart(tmp_path):
+    """With field output on, every output time also writes the spheres (blocks_NNNNN.vtp,
+    with a per-sphere ``damage``) listed in blocks.pvd; a restart keeps the entries up to its
+    checkpoint and appends after them."""
+    from fcm_fsi.dem.output import read_pvd
+    data = coarse_case(0.012)
+    data["run"].update({"output_every": 2, "checkpoint_every": 100})
+    data["output"]["xdmf"] = True
+    case = tmp_path / "case.yaml"
+    case.write_text(yaml.safe_dump(data))
+    full = run_cli([str(case), "--output", str(tmp_path / "full")])
+    assert full.returncode == 0, full.stderr[-2000:]
+    entries = read_pvd(tmp_path / "full" / "blocks.pvd")
+    np.testing.assert_allclose([t for t, _ in entries], [0.0, 0.004, 0.008, 0.012], atol=1e-12)
+    vtp = (tmp_path / "full" / entries[-1][1]).read_text()
+    assert 'Name="damage"' in vtp and 'Name="velocity"' in vtp
+    half = run_cli([str(case), "--output", str(tmp_path / "half"), "--set", "run.t_end=0.008"])
+    assert half.returncode == 0, half.stderr[-2000:]
+    resumed = run_cli([str(case), "--output", str(tmp_path / "half"), "--restart",
+                       str(tmp_path / "half" / "checkpoint.h5")])
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    again = read_pvd(tmp_path / "half" / "blocks.pvd")
+    assert [round(t, 9) for t, _ in again] == [round(t, 9) for t, _ in entries]
+    assert len({f for _, f in again}) == 4 and all((tmp_path / "half" / f).exists() for _, f in again)

@@ -402,3 +402,14 @@ class CohesiveBonds:
                           minlength=self.n_bonds)
         cnt = np.bincount(self.pt_bond, minlength=self.n_bonds)
         return per >= cnt
+
+    def block_damage(self, nblocks: int) -> np.ndarray:
+        """Per block (nblocks,): the fraction of its bonds that are broken, 0 … 1 (0 for a
+        block without bonds) — what the block output colours by."""
+        first = np.unique(self.pt_bond, return_index=True)[1]       # one point per bond
+        a, b = self.pt_a[first], self.pt_b[first]
+        broken = self.broken_bonds()[self.pt_bond[first]].astype(float)
+        total = np.bincount(a, minlength=nblocks) + np.bincount(b, minlength=nblocks)
+        lost = (np.bincount(a, weights=broken, minlength=nblocks)
+                + np.bincount(b, weights=broken, minlength=nblocks))
+        return np.where(total > 0, lost / np.maximum(total, 1), 0.0)

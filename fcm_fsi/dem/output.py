@@ -26,8 +26,9 @@ def _array(name: str, a: np.ndarray, ncomp: int) -> str:
             f"{_b64(a)}</DataArray>")
 
 
-def write_vtp(path: Path, state: DEMState) -> None:
-    """One PolyData file: a vertex per sphere with radius, block id and velocity."""
+def write_vtp(path: Path, state: DEMState, extra: dict[str, np.ndarray] | None = None) -> None:
+    """One PolyData file: a vertex per sphere with radius, block id and velocity, and the
+    per-sphere arrays of ``extra`` (name → (ns,) or (ns, 3))."""
     ns = state.ns
     vel = state.vel[state.sph_block] + np.cross(state.omega[state.sph_block],
                                                   state.sph_pos - state.pos[state.sph_block])
@@ -38,7 +39,9 @@ def write_vtp(path: Path, state: DEMState) -> None:
            'NumberOfStrips="0" NumberOfPolys="0">',
            "<PointData Scalars=\"radius\">", _array("radius", state.sph_radius, 1),
            _array("block", state.sph_block.astype(np.int64), 1), _array("velocity", vel, 3),
-           _array("material", state.sph_material.astype(np.int64), 1), "</PointData>",
+           _array("material", state.sph_material.astype(np.int64), 1),
+           *(_array(k, np.asarray(v), 1 if np.ndim(v) == 1 else 3) for k, v in (extra or {}).items()),
+           "</PointData>",
            "<Points>", _array("Points", state.sph_pos, 3), "</Points>",
            "<Verts>", _array("connectivity", conn, 1), _array("offsets", conn + 1, 1), "</Verts>",
            "</Piece>", "</PolyData>", "</VTKFile>"]
@@ -50,6 +53,18 @@ def write_pvd(path: Path, entries: list[tuple[float, str]]) -> None:
     rows = "\n".join(f'<DataSet timestep="{t!r}" group="" part="0" file="{f}"/>' for t, f in entries)
     Path(path).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
                           f"<Collection>\n{rows}\n</Collection>\n</VTKFile>\n")
+
+
+def read_pvd(path: Path, t_max: float = np.inf) -> list[tuple[float, str]]:
+    """The (time, file) entries of a collection written by :func:`write_pvd` up to ``t_max``
+    [s] (a restart continues the collection from its checkpoint); [] if there is none."""
+    import re
+    path = Path(path)
+    if not path.exists():
+        return []
+    rows = re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', path.read_text())
+    limit = t_max + 1e-12 * max(abs(t_max), 1.0) if np.isfinite(t_max) else np.inf
+    return [(float(t), f) for t, f in rows if float(t) <= limit]
 
 
 def write_checkpoint(path: Path, system, extra: dict | None = None) -> None:

@@ -189,6 +189,9 @@ class CoupledModel:
                                             {"t": "s", "bond": "-", "block_a": "-", "block_b": "-"}, comm.rank,
                                             lazy=True)
             self._broken_before = self.bonds.broken_bonds()
+        # the blocks for ParaView: blocks_NNNNN.vtp + blocks.pvd at every field output
+        self.blocks_dir = Path(out_dir) if out_dir is not None and case.output.xdmf else None
+        self.blocks_pvd: list[tuple[float, str]] = []
         log.info("coupled: %d blocks, %d spheres; DEM dt %.4g s; level-set band %.4g m, gap fill %.4g m "
                  "(%d walls); cut cells %d, smallest cut fraction %.2e", self.nb, st.ns, self.system.dt, self.band,
                  self.gap, len(self.levelset.walls), self.stats.cut_cells, self.stats.min_cut_fraction)
@@ -669,9 +672,26 @@ class CoupledModel:
         globals_.update(self.dem_arrays())
         return fields, globals_
 
+    def write_output(self, t: float) -> None:
+        """The blocks at a field output (rank 0): ``blocks_NNNNN.vtp`` with every sphere's
+        radius, block, velocity and its block's ``damage`` (fraction of its bonds broken),
+        listed with its time in ``blocks.pvd`` — opens in ParaView beside ``fields.xdmf``."""
+        if self.blocks_dir is None or self.comm.rank != 0:
+            return
+        from ..dem.output import write_pvd, write_vtp
+        st = self.system.state
+        damage = (self.bonds.block_damage(self.nb) if self.bonds is not None else np.zeros(self.nb))
+        name = f"blocks_{len(self.blocks_pvd):05d}.vtp"
+        write_vtp(self.blocks_dir / name, st, {"damage": damage[st.sph_block]})
+        self.blocks_pvd.append((float(t), name))
+        write_pvd(self.blocks_dir / "blocks.pvd", self.blocks_pvd)
+
     def load_state(self, checkpoint) -> None:
         self.fluid.load_state(checkpoint)
         self.load_dem_arrays(checkpoint.globals)
+        if self.blocks_dir is not None:                    # the collection continues from the checkpoint
+            from ..dem.output import read_pvd
+            self.blocks_pvd = read_pvd(self.blocks_dir / "blocks.pvd", checkpoint.time)
         for csv in (self.bodies_csv, self.breaks_csv):     # continue the earlier run's files
             if csv is not None:
                 csv.resume(checkpoint.time)

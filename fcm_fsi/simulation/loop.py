@@ -93,6 +93,14 @@ class TimeLoop:
                 write_checkpoint(self.out / "checkpoint.h5", self.comm, self.fingerprint, self.step, self.t,
                                  dt, fields, globals_)
 
+    def write_fields(self) -> None:
+        """The fluid fields (XDMF) and whatever else the model writes at an output time
+        (coupled runs: the blocks, ``write_output``)."""
+        self.fields.write(self.t)
+        extra = getattr(self.model, "write_output", None)
+        if extra is not None:
+            extra(self.t)
+
     def record(self, dt: float, diag: dict[str, float]) -> None:
         with self.timer("output"):
             self.series.write(step=self.step, t=self.t, dt=dt, **diag)
@@ -110,7 +118,7 @@ class TimeLoop:
         if self.step == 0:
             self.record(0.0, diag)
             if self.fields:
-                self.fields.write(self.t)
+                self.write_fields()
         dt = run.dt
         while self.t < run.t_end * (1 - 1e-12):
             dt = next_dt(self.case, self.model, self.t)
@@ -134,7 +142,7 @@ class TimeLoop:
             done = self.t >= run.t_end * (1 - 1e-12)
             if self.fields and (done or (run.output_every and self.step % run.output_every == 0)):
                 with self.timer("output"):
-                    self.fields.write(self.t)
+                    self.write_fields()
             if done or self.step % run.checkpoint_every == 0:
                 self.checkpoint(dt)
             if done or self.step % run.log_every == 0:
