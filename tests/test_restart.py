@@ -143,6 +143,21 @@ def test_fingerprint_ignores_the_solver_choice_but_not_the_physics(root):
     assert case_fingerprint(load_case(path, solver)) == base
     assert case_fingerprint(load_case(path, ["fluid.density=1000.5"])) != base
     assert case_fingerprint(load_case(path, ["fluid.rtol=1e-6"])) != base
+    # checkpoints written before (their hash covered the solver options) are still accepted
+    legacy = case_fingerprint(load_case(path), legacy=True)
+    assert legacy != base and case_fingerprint(load_case(path, solver[:1]), legacy=True) != legacy
+
+
+def test_a_checkpoint_is_accepted_under_any_of_the_given_fingerprints(tmp_path):
+    from mpi4py import MPI
+
+    from fcm_fsi.config.loader import ConfigError
+    from fcm_fsi.io.checkpoint import read_checkpoint, write_checkpoint
+    ck = tmp_path / "c.h5"
+    write_checkpoint(ck, MPI.COMM_WORLD, "old-hash", 3, 0.5, 0.1, {}, {"x": np.arange(3.0)})
+    assert read_checkpoint(ck, MPI.COMM_WORLD, ("new-hash", "old-hash")).step == 3
+    with pytest.raises(ConfigError, match="the case changed"):
+        read_checkpoint(ck, MPI.COMM_WORLD, "new-hash")
 
 
 def test_series_csv_resumes_at_the_checkpoint_time(tmp_path):

@@ -23,17 +23,19 @@ from mpi4py import MPI
 from ..config.loader import ConfigError, to_dict
 
 
-def case_fingerprint(case) -> str:
+def case_fingerprint(case, legacy: bool = False) -> str:
     """Hash of the resolved case, ignoring what a restart may change: end time, cadence, output,
     and how the linear systems are solved (``fluid.petsc``, ``fluid.reuse_preconditioner``,
     ``phase_field.petsc`` — e.g. a direct solver after an iterative one broke down; they change
-    the solution only at solver tolerance)."""
+    the solution only at solver tolerance). ``legacy``: the hash of checkpoints written before
+    session 14, which still covered the solver options (such checkpoints are still accepted)."""
     data = to_dict(case)
     for key in ("t_end", "log_every", "output_every", "checkpoint_every"):
         data["run"].pop(key, None)
-    for section, keys in (("fluid", ("petsc", "reuse_preconditioner")), ("phase_field", ("petsc",))):
-        for key in keys:
-            (data.get(section) or {}).pop(key, None)
+    if not legacy:
+        for section, keys in (("fluid", ("petsc", "reuse_preconditioner")), ("phase_field", ("petsc",))):
+            for key in keys:
+                (data.get(section) or {}).pop(key, None)
     data.pop("output", None)
     data.pop("description", None)
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
@@ -82,8 +84,10 @@ def write_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str, step: int, ti
     comm.barrier()
 
 
-def read_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str) -> Checkpoint:
-    """Collective: read a checkpoint written by :func:`write_checkpoint`; refuse mismatches."""
+def read_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str | tuple[str, ...]) -> Checkpoint:
+    """Collective: read a checkpoint written by :func:`write_checkpoint`; refuse mismatches
+    (``fingerprint``: the case's, or several accepted ones)."""
+    accepted = (fingerprint,) if isinstance(fingerprint, str) else tuple(fingerprint)
     error, payload = None, None
     if comm.rank == 0:
         import h5py
@@ -96,9 +100,9 @@ def read_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str) -> Checkpoint:
                 if int(a["ranks"]) != comm.size:
                     raise ConfigError(f"{path}: written by {int(a['ranks'])} rank(s), this run has {comm.size}; "
                                       f"restart with mpirun -n {int(a['ranks'])}")
-                if a["fingerprint"] != fingerprint:
+                if a["fingerprint"] not in accepted:
                     raise ConfigError(f"{path}: the case changed since this checkpoint was written "
-                                      "(only run.t_end, cadences and output may change on restart)")
+                                      "(only run.t_end, cadences, output and solver options may change on restart)")
                 fields = {n: (g["coords"][...], g["values"][...]) for n, g in f.get("fields", {}).items()}
                 globals_ = {n: d[...] for n, d in f.get("globals", {}).items()}
                 payload = (int(a["step"]), float(a["time"]), float(a["dt"]), fields, globals_)

@@ -75,7 +75,7 @@ class TimeLoop:
         self.timer = StageTimer()
         self.step, self.t = 0, 0.0
         if restart:
-            ck = read_checkpoint(Path(restart), comm, self.fingerprint)
+            ck = read_checkpoint(Path(restart), comm, (self.fingerprint, case_fingerprint(case, legacy=True)))
             model.load_state(ck)
             self.step, self.t = ck.step, ck.time
             log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)
