@@ -186,3 +186,21 @@ def test_series_csv_resumes_at_the_checkpoint_time(tmp_path):
     assert (tmp_path / "e.csv").read_text() == "t [s]\n"
     empty.write(t=1.0)                                    # after close: ignored, not a new file
     assert (tmp_path / "e.csv").read_text() == "t [s]\n"
+
+
+def test_checkpoints_of_code_before_an_option_existed_are_accepted_only_at_its_old_value(root):
+    """An option added later (coupling.load_split) was not in the hash of older checkpoints:
+    such a checkpoint is accepted while the case keeps the option at the value that does what
+    the older code did, and refused once the option changes the physics."""
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.io.checkpoint import accepted_fingerprints, case_fingerprint
+    path = root / "cases" / "block_overturn.yaml"
+    owner = load_case(path)
+    old = case_fingerprint(owner, without=(("coupling", "load_split"),))
+    assert old != case_fingerprint(owner)
+    assert accepted_fingerprints(owner)[0] == case_fingerprint(owner)
+    assert old in accepted_fingerprints(owner)
+    assert case_fingerprint(owner, legacy=True, without=(("coupling", "load_split"),)) in accepted_fingerprints(owner)
+    shared = load_case(path, ["coupling.load_split=shared"])
+    assert old not in accepted_fingerprints(shared)
+    assert case_fingerprint(shared) in accepted_fingerprints(shared)

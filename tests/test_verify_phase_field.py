@@ -46,3 +46,18 @@ def test_phase_field_quick_levels_pass(name, tmp_path):
     res = run_verify([name, "--level", "quick", "--out", str(tmp_path)])
     assert res.returncode == 0, res.stdout + res.stderr
     assert list((tmp_path / name).glob("*.png"))
+
+
+def test_resume_picks_the_runs_own_checkpoint_only_when_asked(tmp_path):
+    """``--resume``: a run continues from the checkpoint.h5 in its own folder (the time loop
+    then checks it is of the same case); without the flag, or without a checkpoint, it starts over."""
+    from fcm_fsi.verify.registry import resume_checkpoint, set_resume
+    try:
+        set_resume(True)
+        assert resume_checkpoint(tmp_path) is None
+        (tmp_path / "checkpoint.h5").write_bytes(b"")
+        assert resume_checkpoint(tmp_path) == str(tmp_path / "checkpoint.h5")
+        set_resume(False)
+        assert resume_checkpoint(tmp_path) is None
+    finally:
+        set_resume(False)

@@ -23,12 +23,21 @@ from mpi4py import MPI
 from ..config.loader import ConfigError, to_dict
 
 
-def case_fingerprint(case, legacy: bool = False) -> str:
+# Options added after checkpoints were already being written, with the value that does what
+# the code did before the option existed. A checkpoint hashed without such an option is still
+# accepted when the case leaves the option at that value (and only then). Add new options here.
+ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
+    ("coupling", "load_split", "owner"),        # session 14
+)
+
+
+def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str], ...] = ()) -> str:
     """Hash of the resolved case, ignoring what a restart may change: end time, cadence, output,
     and how the linear systems are solved (``fluid.petsc``, ``fluid.reuse_preconditioner``,
     ``phase_field.petsc`` — e.g. a direct solver after an iterative one broke down; they change
     the solution only at solver tolerance). ``legacy``: the hash of checkpoints written before
-    session 14, which still covered the solver options (such checkpoints are still accepted)."""
+    session 14, which still covered the solver options (such checkpoints are still accepted).
+    ``without``: (section, key) options left out, as in checkpoints written before they existed."""
     data = to_dict(case)
     for key in ("t_end", "log_every", "output_every", "checkpoint_every"):
         data["run"].pop(key, None)
@@ -36,9 +45,27 @@ def case_fingerprint(case, legacy: bool = False) -> str:
         for section, keys in (("fluid", ("petsc", "reuse_preconditioner")), ("phase_field", ("petsc",))):
             for key in keys:
                 (data.get(section) or {}).pop(key, None)
+    for section, key in without:
+        (data.get(section) or {}).pop(key, None)
     data.pop("output", None)
     data.pop("description", None)
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def accepted_fingerprints(case) -> tuple[str, ...]:
+    """Fingerprints a checkpoint of this case may carry: the current one first, then those of
+    older code — before the solver options were left out (``legacy``) and before each option of
+    :data:`ADDED_OPTIONS` existed, where this case keeps that option at its old-behaviour value."""
+    data = to_dict(case)
+    older = tuple((sec, key) for sec, key, value in ADDED_OPTIONS
+                  if (data.get(sec) or {}).get(key, value) == value)
+    out = []
+    for n in range(len(older) + 1):
+        for legacy in (False, True):
+            fp = case_fingerprint(case, legacy, older[len(older) - n:] if n else ())
+            if fp not in out:
+                out.append(fp)
+    return tuple(out)
 
 
 @dataclass

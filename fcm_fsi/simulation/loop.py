@@ -16,7 +16,7 @@ import numpy as np
 from mpi4py import MPI
 
 from ..config.case import Case
-from ..io.checkpoint import case_fingerprint, read_checkpoint, write_checkpoint
+from ..io.checkpoint import accepted_fingerprints, case_fingerprint, read_checkpoint, write_checkpoint
 from ..io.csv import TimeSeriesCSV
 from ..io.fields import FieldWriter
 from ..io.logging import get_logger
@@ -75,7 +75,7 @@ class TimeLoop:
         self.timer = StageTimer()
         self.step, self.t = 0, 0.0
         if restart:
-            ck = read_checkpoint(Path(restart), comm, (self.fingerprint, case_fingerprint(case, legacy=True)))
+            ck = read_checkpoint(Path(restart), comm, accepted_fingerprints(case))
             model.load_state(ck)
             self.step, self.t = ck.step, ck.time
             log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)

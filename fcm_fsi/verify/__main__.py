@@ -4,6 +4,7 @@
     python -m fcm_fsi.verify --list
     python -m fcm_fsi.verify all --level full --report docs/verification
     python -m fcm_fsi.verify --out verification --report docs/verification   (report only)
+    python -m fcm_fsi.verify NAME --level full --out DIR --resume   (continue from DIR's checkpoints)
 
 Writes DIR/NAME/metrics.json and PNG plots, prints a table, exits 1 when a metric fails.
 """
@@ -19,7 +20,7 @@ import time
 from pathlib import Path
 
 from ..io.logging import setup_logging
-from .registry import load_all
+from .registry import load_all, set_resume
 
 
 def _mpirun(np_: int) -> list[str]:
@@ -50,7 +51,8 @@ def format_table(name: str, level: str, ranks: int, wall: float, metrics: dict) 
     return "\n".join(lines)
 
 
-def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNING") -> bool:
+def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNING",
+            resume: bool = False) -> bool:
     """Run a case (re-launching under mpirun when np_ > 1); returns True when all metrics pass."""
     cases = load_all()
     if name not in cases:
@@ -59,11 +61,12 @@ def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNIN
         env = mpi_env()
         env["FCM_FSI_VERIFY_INNER"] = "1"
         cmd = _mpirun(np_) + [sys.executable, "-m", "fcm_fsi.verify", name, "--level", level,
-                             "--out", str(out), "--np", str(np_), "--log-level", log_level]
+                             "--out", str(out), "--np", str(np_), "--log-level", log_level] + (["--resume"] if resume else [])
         rc = subprocess.call(cmd, env=env)
         return rc == 0
     from mpi4py import MPI
     comm = MPI.COMM_WORLD
+    set_resume(resume)
     case_dir = out / name
     if comm.rank == 0:
         case_dir.mkdir(parents=True, exist_ok=True)
@@ -119,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report", type=Path, default=None, help="with 'all': write a markdown report here")
     ap.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING"], default="WARNING",
                     help="progress messages of the cases (INFO: e.g. per-cycle progress of long runs)")
+    ap.add_argument("--resume", action="store_true",
+                    help="runs with a checkpoint.h5 of their own case under --out continue from it")
     args = ap.parse_args(argv)
     setup_logging(args.log_level)
     cases = load_all()
@@ -134,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     ok = True
     for name in names:
         np_ = args.np if args.np is not None else cases[name].default_ranks if name in cases else 1
-        ok &= run_one(name, args.level, args.out, np_, args.log_level)
+        ok &= run_one(name, args.level, args.out, np_, args.log_level, args.resume)
     if args.report is not None:
         write_report(args.out, args.report)
     return 0 if ok else 1

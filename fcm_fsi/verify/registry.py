@@ -15,6 +15,23 @@ from typing import Callable, Literal
 
 Level = Literal["quick", "full"]
 
+_RESUME = False
+
+
+def set_resume(flag: bool) -> None:
+    """``--resume``: runs that find a checkpoint of their own case in their output folder
+    continue from it instead of starting over (a long full level stopped by a crash or a
+    reboot loses at most one checkpoint interval)."""
+    global _RESUME
+    _RESUME = bool(flag)
+
+
+def resume_checkpoint(run_dir: Path) -> str | None:
+    """The checkpoint to continue a run in ``run_dir`` from, or None (not resuming, or no
+    checkpoint there). The time loop refuses a checkpoint of a different case."""
+    ck = Path(run_dir) / "checkpoint.h5"
+    return str(ck) if _RESUME and ck.exists() else None
+
 
 @dataclass(frozen=True)
 class Metric:

@@ -25,7 +25,7 @@ from ...config.case import apply_resolution
 from ...simulation.coupled import CoupledModel
 from ...io.logging import get_logger
 from ...simulation.loop import SimulationDiverged, TimeLoop
-from ..registry import Metric, at_least, at_most, register, rel_error_metric, report_only
+from ..registry import Metric, at_least, at_most, register, rel_error_metric, report_only, resume_checkpoint
 from .phase_field import read_series
 from .two_phase import case_output
 
@@ -64,7 +64,7 @@ def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.nda
     model = CoupledModel(case, comm, out_dir=sub)
     failure = None
     try:
-        TimeLoop(case, model, sub, comm, restart=None).run()
+        TimeLoop(case, model, sub, comm, restart=resume_checkpoint(sub)).run()
     except SimulationDiverged as err:
         failure = str(err)
         log.error("%s diverged: %s", data["name"], failure)
