@@ -291,3 +291,62 @@ def test_check_replicated_passes_for_identical_ranks_and_names_the_drifting_arra
     assert res[0]["z"] == res[1]["z"]
     for r in res:   # every rank stops, and the message names the array and the rank
         assert r["msg"] is not None and "): vel of rank(s) [1] differ from rank 0" in r["msg"]
+
+
+# ------------------------------------------------------------------ bonded clusters
+def _random_blocks(n, seed):
+    rng = np.random.default_rng(seed)
+    pos = rng.normal(size=(n, 3))
+    mass = rng.uniform(1.0, 5.0, n)
+    R = np.array([np.linalg.qr(rng.normal(size=(3, 3)))[0] for _ in range(n)])
+    inertia_world = np.einsum("bij,bj,bkj->bik", R, rng.uniform(0.1, 1.0, (n, 3)), R)
+    return rng, pos, mass, inertia_world
+
+
+def test_bonded_clusters_are_the_components_over_intact_bonds():
+    from fcm_fsi.coupling.dem_side import bonded_clusters
+    a, b = np.array([0, 1, 3, 4]), np.array([1, 2, 4, 5])
+    lab = bonded_clusters(7, a, b, np.array([True, True, False, True]))
+    assert lab[0] == lab[1] == lab[2] and lab[4] == lab[5]
+    assert len({lab[0], lab[3], lab[4], lab[6]}) == 4
+
+
+def test_cluster_motion_of_a_rigidly_moving_cluster_is_each_blocks_own():
+    """Blocks moving as one rigid body (v_b = V + Ω × (x_b − X), ω_b = Ω) get their own
+    velocity back at every point; a single block keeps its own x, v, ω exactly."""
+    from fcm_fsi.coupling.dem_side import cluster_rigid_motion, rigid_body_velocity
+    rng, pos, mass, Iw = _random_blocks(6, 1)
+    V, W, X0 = rng.normal(size=3), rng.normal(size=3), rng.normal(size=3)
+    vel = V + np.cross(W, pos - X0)
+    omega = np.tile(W, (6, 1))
+    vel[5], omega[5] = rng.normal(size=3), rng.normal(size=3)         # block 5 alone
+    labels = np.array([0, 0, 0, 0, 0, 1])
+    X, Vc, Wc = cluster_rigid_motion(pos, vel, omega, mass, Iw, labels, np.zeros(6, bool))
+    pts = pos[:5] + rng.normal(size=(5, 3))
+    own = rigid_body_velocity(pos, vel, omega, pts, np.arange(5))
+    np.testing.assert_allclose(rigid_body_velocity(X, Vc, Wc, pts, np.arange(5)), own, rtol=1e-11, atol=1e-12)
+    np.testing.assert_array_equal(np.vstack([X[5], Vc[5], Wc[5]]), np.vstack([pos[5], vel[5], omega[5]]))
+
+
+def test_cluster_motion_keeps_momentum_and_angular_momentum_and_a_fixed_block_anchors():
+    """For arbitrary (non-rigid) block velocities the cluster's rigid motion carries the same
+    momentum Σ m v and angular momentum Σ (I ω + m r × v) as the blocks; with a fixed block in
+    it the cluster is at rest."""
+    from fcm_fsi.coupling.dem_side import cluster_rigid_motion
+    rng, pos, mass, Iw = _random_blocks(5, 2)
+    vel, omega = rng.normal(size=(5, 3)), rng.normal(size=(5, 3))
+    labels = np.zeros(5, int)
+    X, V, W = cluster_rigid_motion(pos, vel, omega, mass, Iw, labels, np.zeros(5, bool))
+    np.testing.assert_allclose(X[0], (mass[:, None] * pos).sum(0) / mass.sum(), rtol=1e-13)
+    v_rigid = V + np.cross(W, pos - X)
+    np.testing.assert_allclose((mass[:, None] * v_rigid).sum(0), (mass[:, None] * vel).sum(0), rtol=1e-12, atol=1e-12)
+    r = pos - X
+
+    def ang(v, w):
+        return (np.einsum("bij,bj->bi", Iw, w) + mass[:, None] * np.cross(r, v)).sum(0)
+    np.testing.assert_allclose(ang(v_rigid, W), ang(vel, omega), rtol=1e-11, atol=1e-12)
+    fixed = np.zeros(5, bool)
+    fixed[3] = True
+    _, V, W = cluster_rigid_motion(pos, vel, omega, mass, Iw, labels, fixed)
+    np.testing.assert_array_equal(V, 0.0)
+    np.testing.assert_array_equal(W, 0.0)

@@ -189,18 +189,28 @@ def test_series_csv_resumes_at_the_checkpoint_time(tmp_path):
 
 
 def test_checkpoints_of_code_before_an_option_existed_are_accepted_only_at_its_old_value(root):
-    """An option added later (coupling.load_split) was not in the hash of older checkpoints:
-    such a checkpoint is accepted while the case keeps the option at the value that does what
-    the older code did, and refused once the option changes the physics."""
+    """Options added later (coupling.load_split, then coupling.wall_motion) were not in the hash
+    of older checkpoints: such a checkpoint (hashed without the options added after it) is
+    accepted while the case keeps those options at the values that do what the older code
+    did, and refused once one of them changes the physics."""
     from fcm_fsi.config.case import load_case
-    from fcm_fsi.io.checkpoint import accepted_fingerprints, case_fingerprint
+    from fcm_fsi.io.checkpoint import ADDED_OPTIONS, accepted_fingerprints, case_fingerprint
     path = root / "cases" / "block_overturn.yaml"
     owner = load_case(path)
-    old = case_fingerprint(owner, without=(("coupling", "load_split"),))
-    assert old != case_fingerprint(owner)
-    assert accepted_fingerprints(owner)[0] == case_fingerprint(owner)
-    assert old in accepted_fingerprints(owner)
-    assert case_fingerprint(owner, legacy=True, without=(("coupling", "load_split"),)) in accepted_fingerprints(owner)
+    keys = [(sec, key) for sec, key, _ in ADDED_OPTIONS]
+    assert keys[:2] == [("coupling", "load_split"), ("coupling", "wall_motion")]
+    accepted = accepted_fingerprints(owner)
+    assert accepted[0] == case_fingerprint(owner)
+    for k in range(len(keys)):
+        before = tuple(keys[k:])          # a checkpoint from before option k existed
+        for legacy in (False, True):
+            assert case_fingerprint(owner, legacy, before) in accepted
+    # a hash missing only an older option is no state any code wrote
+    assert case_fingerprint(owner, without=(keys[0],)) not in accepted
     shared = load_case(path, ["coupling.load_split=shared"])
-    assert old not in accepted_fingerprints(shared)
-    assert case_fingerprint(shared) in accepted_fingerprints(shared)
+    assert case_fingerprint(shared, without=tuple(keys)) not in accepted_fingerprints(shared)
+    assert case_fingerprint(shared, without=tuple(keys[1:])) in accepted_fingerprints(shared)
+    cluster = load_case(path, ["coupling.wall_motion=bonded_cluster"])
+    assert case_fingerprint(cluster, without=tuple(keys[1:])) not in accepted_fingerprints(cluster)
+    assert case_fingerprint(cluster, without=tuple(keys)) not in accepted_fingerprints(cluster)
+    assert accepted_fingerprints(cluster)[1:] == (case_fingerprint(cluster, legacy=True),)

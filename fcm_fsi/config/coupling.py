@@ -34,6 +34,13 @@ class CouplingConfig:
                      "smallest, h) of as deep, the two share it, the second's weight ½ − (d₂ − d₁)/(2h) ≥ 0 — continuous where "
                      "widened shapes overlap and blocks turn, where owner jumps between bonded neighbours every "
                      "step (docs/tsunami.md, session 14)")
+    wall_motion: Literal["block", "bonded_cluster"] = param(
+        "block", doc="whose rigid motion the fluid's wall velocity ū follows: block = each block's own v, ω; "
+                     "bonded_cluster = the rigid motion (momentum and angular momentum kept) of the cluster of blocks "
+                     "still joined by intact bonds, so the bonds' vibration (µm, faster than the fluid step) is not "
+                     "fed into the wall condition, where neighbours' differing ū made the penalty push them apart "
+                     "(docs/tsunami.md, session 15); a block whose bonds have all broken follows its own motion; a "
+                     "cluster holding a fixed block is at rest")
     cut_extension: float = param(
         1.0, doc="β of the cut-cell extension: the solid part of every cut cell carries a Brinkman term "
                  "β ρ/Δt (u − ū) (its reaction is part of the block load) and β × the PSPG term, so nodes with "

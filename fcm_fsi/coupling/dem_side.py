@@ -45,7 +45,7 @@ from ..dem.state import DEMState, quat_to_matrix_np
 from ..dem.system import DEMSystem, substep_count
 from ..fcm.levelset import BOX, SPHERE, Shapes
 
-__all__ = ["DEMSubcycler", "Exchange", "fluid_gyration_ratio", "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity",
+__all__ = ["DEMSubcycler", "Exchange", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio", "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity",
            "shapes_of_blocks", "state_digests", "substep_count"]
 
 REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # compared across ranks
@@ -214,6 +214,61 @@ def rigid_body_velocity(pos: np.ndarray, vel: np.ndarray, omega: np.ndarray, poi
     return u
 
 
+def bonded_clusters(nb: int, bond_a: np.ndarray, bond_b: np.ndarray, intact: np.ndarray) -> np.ndarray:
+    """Label (nb,) of the cluster each block belongs to: the connected components of the
+    blocks over the bonds a–b that are still ``intact`` (an unbonded block is its own cluster)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    a, b = np.asarray(bond_a)[intact], np.asarray(bond_b)[intact]
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(nb, nb))
+    return connected_components(graph, directed=False)[1]
+
+
+def cluster_rigid_motion(pos: np.ndarray, vel: np.ndarray, omega: np.ndarray, mass: np.ndarray,
+                         inertia_world: np.ndarray, labels: np.ndarray,
+                         fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rigid motion of each block's cluster, per block: (X, V, Ω) (nb, 3) such that
+    ū(x) = V + Ω × (x − X) for a point x of the block.
+
+    X, V: the cluster's centre of mass [m] and its velocity [m/s] (momentum / mass);
+    Ω = J⁻¹ L [rad/s], L the cluster's angular momentum about X and J its inertia tensor about
+    X (``inertia_world`` (nb, 3, 3) the blocks' own tensors in the world frame [kg m²], plus
+    the parallel-axis terms of ``mass`` [kg]). So the rigid part of the blocks' motion keeps
+    the cluster's momentum and angular momentum, and blocks that move as one rigid body get
+    exactly their own velocities back. A cluster holding a ``fixed`` block is at rest
+    (V = Ω = 0); a block alone in its cluster keeps its own pos, v, ω exactly."""
+    nb = len(mass)
+    X, V, W = pos.copy(), vel.copy(), omega.copy()
+    counts = np.bincount(labels, minlength=labels.max(initial=-1) + 1)
+    multi = counts[labels] > 1
+    if multi.any():
+        lab = labels[multi]
+        m = mass[multi]
+        nc = counts.size
+        M = np.bincount(lab, weights=m, minlength=nc)
+        Mg = np.where(M > 0, M, 1.0)
+        Xc = np.stack([np.bincount(lab, weights=m * pos[multi, k], minlength=nc) for k in range(3)], 1) / Mg[:, None]
+        Vc = np.stack([np.bincount(lab, weights=m * vel[multi, k], minlength=nc) for k in range(3)], 1) / Mg[:, None]
+        r = pos[multi] - Xc[lab]
+        Iw = inertia_world[multi]
+        L_b = np.einsum("bij,bj->bi", Iw, omega[multi]) + m[:, None] * np.cross(r, vel[multi])
+        J_b = Iw + m[:, None, None] * (np.einsum("bk,bk->b", r, r)[:, None, None] * np.eye(3)
+                                       - np.einsum("bi,bj->bij", r, r))
+        Lc = np.zeros((nc, 3))
+        Jc = np.zeros((nc, 3, 3))
+        np.add.at(Lc, lab, L_b)
+        np.add.at(Jc, lab, J_b)
+        used = np.unique(lab)
+        Wc = np.zeros((nc, 3))
+        Wc[used] = np.linalg.solve(Jc[used], Lc[used][..., None])[..., 0]
+        anchored = np.zeros(nc, bool)
+        anchored[lab[fixed[multi]]] = True
+        Vc[anchored] = 0.0
+        Wc[anchored] = 0.0
+        X[multi], V[multi], W[multi] = Xc[lab], Vc[lab], Wc[lab]
+    return X, V, W
+
+
 # ------------------------------------------------------------------ sub-cycling
 @dataclass(frozen=True)
 class Exchange:
@@ -281,6 +336,14 @@ class DEMSubcycler:
         """Copies of the centres of mass (nb, 3) [m] and orientations (nb, 4) (w, x, y, z)."""
         st = self.system.state
         return st.pos.copy(), st.quat.copy()
+
+    def motion(self, mean: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(x_c, v, ω) (nb, 3) of every block: centres, and the leapfrog velocities of the last
+        half step or, with ``mean``, their means over the last fluid step's sub-steps."""
+        st = self.system.state
+        if mean and self.mean_velocity is not None:
+            return st.pos, self.mean_velocity, self.mean_omega
+        return st.pos, st.vel, st.omega
 
     def rigid_velocity(self, points: np.ndarray, owner: np.ndarray, mean: bool = False) -> np.ndarray:
         """Rigid-body velocity ū [m/s] at ``points`` (n, 3) of block ``owner`` (n,), zero

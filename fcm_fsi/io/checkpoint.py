@@ -28,6 +28,7 @@ from ..config.loader import ConfigError, to_dict
 # accepted when the case leaves the option at that value (and only then). Add new options here.
 ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("coupling", "load_split", "owner"),        # session 14
+    ("coupling", "wall_motion", "block"),       # session 15
 )
 
 
@@ -54,15 +55,18 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
 
 def accepted_fingerprints(case) -> tuple[str, ...]:
     """Fingerprints a checkpoint of this case may carry: the current one first, then those of
-    older code — before the solver options were left out (``legacy``) and before each option of
-    :data:`ADDED_OPTIONS` existed, where this case keeps that option at its old-behaviour value."""
+    older code — before the solver options were left out (``legacy``), and before the options
+    :data:`ADDED_OPTIONS` [k:] existed, where this case keeps all of those at their
+    old-behaviour values."""
     data = to_dict(case)
-    older = tuple((sec, key) for sec, key, value in ADDED_OPTIONS
-                  if (data.get(sec) or {}).get(key, value) == value)
+    options = [(sec, key) for sec, key, _ in ADDED_OPTIONS]
+    at_old = [(data.get(sec) or {}).get(key, value) == value for sec, key, value in ADDED_OPTIONS]
     out = []
-    for n in range(len(older) + 1):
+    for k in range(len(options), -1, -1):           # k = len: nothing left out (current code)
+        if not all(at_old[k:]):
+            continue
         for legacy in (False, True):
-            fp = case_fingerprint(case, legacy, older[len(older) - n:] if n else ())
+            fp = case_fingerprint(case, legacy, tuple(options[k:]))
             if fp not in out:
                 out.append(fp)
     return tuple(out)

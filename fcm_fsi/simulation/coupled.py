@@ -91,6 +91,7 @@ class CoupledModel:
         self.dem = DEMSubcycler(self.system)
         st = self.system.state
         self.nb = st.nb
+        self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
         self._remember_own_inertia(case)
         self.added_mass = np.zeros(self.nb)         # m̃ per block, set every step (_update_added_mass)
         self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
@@ -169,7 +170,6 @@ class CoupledModel:
             self.fluid.pf.volume0 = self.fluid.pf.volume()[0]
             self.water0 = self.comm.allreduce(fem.assemble_scalar(self._water_forms[0]), op=MPI.SUM)
             self.liquid0 = self._liquid_volume_fluid()
-        self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
         if self.bonds is not None:
             self.series_units["broken_bonds"] = "-"
         self.bodies_csv = None
@@ -291,10 +291,11 @@ class CoupledModel:
         unknown of :meth:`_block_velocities`)."""
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
-        ubar = self._rigid_velocity(self.points, owner, velocities)
+        motion = self._wall_motion(velocities)
+        ubar = self._rigid_velocity(self.points, owner, motion)
         share = None
         if self.case.coupling.load_split == "shared":
-            share = self._shared_ownership(owner, velocities, ubar)
+            share = self._shared_ownership(owner, motion, ubar)
         ubar[self.levelset.on_wall] = 0.0      # the gap fill between a block and a wall rests with the wall
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
@@ -306,7 +307,7 @@ class CoupledModel:
             self.fluid.pf.interface_cell_weights = self.cut.fluid_fractions()
         return stats
 
-    def _shared_ownership(self, owner: np.ndarray, velocities, ubar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _shared_ownership(self, owner: np.ndarray, motion, ubar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``coupling.load_split: shared``: at each node the nearest other block (second owner)
         and its weight w = max(0, ½ − (d₂ − d₁)/(2 h)), h = h_min the smallest cell diameter, d₁,
         d₂ the two blocks' signed distances; blends ū in place to (1 − w) ū₁ + w ū₂, so load and
@@ -316,21 +317,35 @@ class CoupledModel:
         w = np.where((second >= 0) & (owner >= 0), w, 0.0)
         blend = w > 0
         if blend.any():
-            u2 = self._rigid_velocity(self.points[blend], second[blend], velocities)
+            u2 = self._rigid_velocity(self.points[blend], second[blend], motion)
             ubar[blend] = (1.0 - w[blend, None]) * ubar[blend] + w[blend, None] * u2
         return second, w
 
-    def _rigid_velocity(self, points: np.ndarray, owner: np.ndarray, velocities=None) -> np.ndarray:
-        """Wall velocity (n, gdim) [m/s] at ``points`` of the blocks ``owner`` (0 where < 0): from
-        the DEM's v, ω (``coupling.wall_velocity``) or from ``velocities``, the iterated unknown."""
+    def _wall_motion(self, velocities=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(X, V, Ω) (nb, 3) per block, the rigid motion ū = V + Ω × (x − X) its wall nodes get:
+        the DEM's x_c, v, ω (``coupling.wall_velocity``) or ``velocities``, the iterated unknown;
+        with ``coupling.wall_motion: bonded_cluster`` the rigid motion of its bonded cluster."""
+        st = self.system.state
         if velocities is None:
-            u = self.dem.rigid_velocity(points, owner, mean=self.case.coupling.wall_velocity == "mean")
+            X, V, W = self.dem.motion(mean=self.case.coupling.wall_velocity == "mean")
         else:
-            from ..coupling.dem_side import rigid_body_velocity
             v = velocities.reshape(2 * self.nb, 3)
-            u = rigid_body_velocity(self.system.state.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None],
-                                    points, owner)
-        return u[:, : self.gdim]
+            X, V, W = st.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None]
+        if self.case.coupling.wall_motion == "bonded_cluster" and self.bonds is not None:
+            from ..coupling.dem_side import bonded_clusters, cluster_rigid_motion
+            first = np.unique(self.bonds.pt_bond, return_index=True)[1]      # one point per bond
+            intact = ~self.bonds.broken_bonds()[self.bonds.pt_bond[first]]
+            labels = bonded_clusters(self.nb, self.bonds.pt_a[first], self.bonds.pt_b[first], intact)
+            R = st.rotation_matrices()
+            inertia_world = np.einsum("bij,bj,bkj->bik", R, self.inertia0, R)
+            X, V, W = cluster_rigid_motion(X, V, W, self.mass0, inertia_world, labels, st.fixed)
+        return X, V, W
+
+    def _rigid_velocity(self, points: np.ndarray, owner: np.ndarray, motion) -> np.ndarray:
+        """Wall velocity (n, gdim) [m/s] at ``points`` of the blocks ``owner`` (0 where < 0) from
+        the per-block rigid ``motion`` (X, V, Ω) of :meth:`_wall_motion`."""
+        from ..coupling.dem_side import rigid_body_velocity
+        return rigid_body_velocity(*motion, points, owner)[:, : self.gdim]
 
     def fluid_part_density(self, rho, rho_cell) -> None:
         """Cell-mean ρ of the PSPG test function over the cell's (weighted) fluid part, not
