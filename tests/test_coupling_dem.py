@@ -350,3 +350,30 @@ def test_cluster_motion_keeps_momentum_and_angular_momentum_and_a_fixed_block_an
     _, V, W = cluster_rigid_motion(pos, vel, omega, mass, Iw, labels, fixed)
     np.testing.assert_array_equal(V, 0.0)
     np.testing.assert_array_equal(W, 0.0)
+
+
+def test_coupled_wall_motion_uses_the_intact_bonds_clusters(one_numba_thread):
+    """``CoupledModel._wall_motion`` with ``wall_motion: bonded_cluster``: blocks 0–1 joined by
+    an intact bond share their cluster's motion, block 2 (its bond to 1 broken) keeps its own;
+    with ``block`` every block keeps its own."""
+    from types import SimpleNamespace
+
+    from fcm_fsi.simulation.coupled import CoupledModel
+    cfg = dem_config([box_block(velocity=[1.0, 0.0, 0.0]), box_block(position=[0.3, 0.0, 0.0]),
+                      box_block(position=[0.6, 0.0, 0.0], velocity=[0.0, 2.0, 0.0])], (0.0, 0.0, 0.0))
+    system = build_system(cfg)
+    st = system.state
+    bonds = SimpleNamespace(pt_bond=np.array([0, 0, 1]), pt_a=np.array([0, 0, 1]), pt_b=np.array([1, 1, 2]),
+                            broken_bonds=lambda: np.array([False, True]))
+    fake = SimpleNamespace(system=system, dem=DEMSubcycler(system), bonds=bonds, nb=3, mass0=st.mass.copy(),
+                           inertia0=st.inertia.copy(), gyration=np.ones(3),
+                           case=SimpleNamespace(coupling=SimpleNamespace(wall_velocity="end",
+                                                                         wall_motion="bonded_cluster")))
+    X, V, W = CoupledModel._wall_motion(fake)
+    np.testing.assert_allclose(V[0], [0.5, 0.0, 0.0])
+    np.testing.assert_allclose(V[1], V[0])
+    np.testing.assert_allclose(X[0], 0.5 * (st.pos[0] + st.pos[1]))
+    np.testing.assert_array_equal(V[2], st.vel[2])
+    fake.case.coupling.wall_motion = "block"
+    X, V, W = CoupledModel._wall_motion(fake)
+    np.testing.assert_array_equal(V, st.vel)
