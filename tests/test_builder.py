@@ -169,3 +169,49 @@ def test_docs_list_every_schema_field():
         assert f"| key `{prefix}.…` |" in text
         for f in dataclasses.fields(cls):
             assert f"| `{f.name}` |" in text and f.metadata["doc"] in text, f.name
+
+
+def dem_config(blocks, cohesive=True):
+    from fcm_fsi.config.dem import DEMConfig
+    data = dict(dt=1e-5, gravity=[0.0, -9.81, 0.0], blocks=blocks,
+                materials=[dict(name="mortar", stiffness=1e6, restitution=0.2, friction_angle=30.0, density=2400.0)])
+    if cohesive:
+        data["cohesive"] = dict(sigma_c=1e5, delta_f=1e-3)
+    return build(DEMConfig, data, "case.yaml", prefix="dem")
+
+
+def brick(y, **kw):
+    return dict(shape="box", material="mortar", position=[1.0, y, 0.0], size=[0.04, 0.05, 0.1], radius=0.005, **kw)
+
+
+def test_bonded_blocks_are_bonded_on_their_shared_faces_only_and_start_stress_free():
+    """``dem.blocks[].bonded``: a stack of three bonded bricks on a fixed bonded footing gets
+    one bond per shared face (3), none to the touching unbonded brick on top; the built
+    configuration carries no bond force."""
+    from fcm_fsi.dem.model import build_system
+    cfg = dem_config([brick(0.025, bonded=True, fixed=True), brick(0.075, bonded=True),
+                      brick(0.125, bonded=True), brick(0.175, bonded=True), brick(0.225)])
+    system = build_system(cfg, with_ledger=False)
+    bonds = next(it for it in system.interactions if hasattr(it, "broken_bonds"))
+    assert bonds.n_bonds == 3 and bonds.n_points == 3 * 4
+    assert sorted(set(zip(bonds.pt_a.tolist(), bonds.pt_b.tolist()))) == [(0, 1), (1, 2), (2, 3)]
+    np.testing.assert_allclose(bonds.bond_area, 0.04 * 0.1)
+    st = system.state
+    f, t = np.zeros((st.nb, 3)), np.zeros((st.nb, 3))
+    bonds.compute(st.pos, st.quat, f, t)
+    assert np.abs(f).max() < 1e-9 and np.abs(t).max() < 1e-12
+    # pulled apart by more than δ_f, the bond between 2 and 3 breaks; the others hold
+    pos = st.pos.copy()
+    pos[3, 1] += 2e-3
+    bonds.compute(pos, st.quat, f, t)
+    assert bonds.broken_bonds().tolist() == [False, False, True]
+
+
+@pytest.mark.parametrize("blocks, cohesive, words", [
+    ([brick(0.025, bonded=True), brick(0.075, bonded=True)], False, "dem.cohesive"),
+    ([brick(0.025, bonded=True, angle=30.0)], True, "bonded"),
+    ([dict(shape="sphere", material="mortar", position=[0, 0, 0], radius=0.01, bonded=True)], True, "bonded"),
+])
+def test_bonded_block_config_errors(blocks, cohesive, words):
+    with pytest.raises(ConfigError, match=words):
+        dem_config(blocks, cohesive)

@@ -226,11 +226,12 @@ def test_settling_sphere_reference_correlations():
 
 
 SPLIT_SCRIPT = """
+import sys
 import time
 from mpi4py import MPI
 from fcm_fsi.verify.cases.coupled import split_for_runs, gather_runs
 comm = MPI.COMM_WORLD
-sub, mine = split_for_runs(comm, 3)
+sub, mine = split_for_runs(comm, 3, ranks_per_run=int(sys.argv[1]))
 if comm.rank == 1:
     time.sleep(1.0)          # a slower group: the others wait for it
 res = gather_runs(comm, sub, {i: (i, sub.size, sub.allreduce(comm.rank)) for i in mine})
@@ -240,15 +241,18 @@ if comm.rank == 0:
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("np_, expected", [
-    (1, [(0, (0, 1, 0)), (1, (1, 1, 0)), (2, (2, 1, 0))]),           # one group runs all three
-    (2, [(0, (0, 1, 0)), (1, (1, 1, 1)), (2, (2, 1, 0))]),           # rank 0: runs 0 and 2
-    (3, [(0, (0, 1, 0)), (1, (1, 1, 1)), (2, (2, 1, 2))]),           # one run per rank
-    (4, [(0, (0, 2, 3)), (1, (1, 1, 1)), (2, (2, 1, 2))])])          # ranks 0 and 3 share run 0
-def test_independent_runs_are_shared_out_over_rank_groups_and_gathered(np_, expected):
-    """verify's split_for_runs/gather_runs (block_overturn's three frictions side by side):
-    every run is done by exactly one group and every rank gets all results."""
-    cmd = [shutil.which("mpirun"), "-n", str(np_), sys.executable, "-c", SPLIT_SCRIPT]
+@pytest.mark.parametrize("np_, per_run, expected", [
+    (1, 1, [(0, (0, 1, 0)), (1, (1, 1, 0)), (2, (2, 1, 0))]),           # one group runs all three
+    (2, 1, [(0, (0, 1, 0)), (1, (1, 1, 1)), (2, (2, 1, 0))]),           # rank 0: runs 0 and 2
+    (3, 1, [(0, (0, 1, 0)), (1, (1, 1, 1)), (2, (2, 1, 2))]),           # one run per rank
+    (4, 1, [(0, (0, 2, 3)), (1, (1, 1, 1)), (2, (2, 1, 2))]),           # ranks 0 and 3 share run 0
+    (2, 2, [(0, (0, 2, 1)), (1, (1, 2, 1)), (2, (2, 2, 1))]),           # both ranks run all three in turn
+    (3, 2, [(0, (0, 3, 3)), (1, (1, 3, 3)), (2, (2, 3, 3))])])          # 3 // 2 = one group of three
+def test_independent_runs_are_shared_out_over_rank_groups_and_gathered(np_, per_run, expected):
+    """verify's split_for_runs/gather_runs (block_overturn's three frictions side by side, or
+    in turn with ``--ranks-per-run``): every run is done by exactly one group and every rank
+    gets all results."""
+    cmd = [shutil.which("mpirun"), "-n", str(np_), sys.executable, "-c", SPLIT_SCRIPT, str(per_run)]
     res = subprocess.run(cmd, cwd=ROOT, env=mpi_env(), capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == str(expected)

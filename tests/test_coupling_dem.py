@@ -119,6 +119,17 @@ def test_advance_refuses_a_wrong_load_shape_and_mode():
         sub.advance(1e-3, np.zeros((1, 3)), np.zeros((1, 3)), mode="cubic")
 
 
+def test_a_diverging_load_stops_the_sub_steps_instead_of_crashing_the_neighbour_search(one_numba_thread):
+    """A non-finite load makes the state non-finite in one DEM step; the sub-steps stop there
+    (the coupled model's check then names the block) instead of the next step's neighbour
+    search failing on a NaN grid (the traceback seen in session 16)."""
+    sub = DEMSubcycler(build_system(dem_config([free_sphere(), free_sphere(position=[0.05, 0.0, 0.0])])))
+    force = np.zeros((2, 3))
+    force[0, 0] = np.inf
+    sub.advance(1e-3, force, np.zeros((2, 3)))
+    assert not np.isfinite(sub.system.state.pos[0]).all()
+
+
 # ------------------------------------------------------------------ interface velocity
 def test_rigid_velocity_is_v_plus_omega_cross_r_on_a_spinning_block(one_numba_thread):
     """Box spinning about its principal z axis while translating, no gravity: ω and v stay

@@ -213,4 +213,24 @@ def test_checkpoints_of_code_before_an_option_existed_are_accepted_only_at_its_o
     cluster = load_case(path, ["coupling.wall_motion=bonded_cluster"])
     assert case_fingerprint(cluster, without=tuple(keys[1:])) not in accepted_fingerprints(cluster)
     assert case_fingerprint(cluster, without=tuple(keys)) not in accepted_fingerprints(cluster)
-    assert accepted_fingerprints(cluster)[1:] == (case_fingerprint(cluster, legacy=True),)
+    # only the code from wall_motion on (with and without the later dem.blocks[].bonded) wrote it
+    later = tuple(keys[2:])
+    assert accepted_fingerprints(cluster) == (case_fingerprint(cluster), case_fingerprint(cluster, legacy=True),
+                                              case_fingerprint(cluster, without=later),
+                                              case_fingerprint(cluster, True, later))
+
+
+def test_a_checkpoint_from_before_blocks_could_be_bonded_is_accepted_while_none_is(root):
+    """``dem.blocks[].bonded`` (session 16) sits in every block: a checkpoint hashed without it
+    is accepted while no block is bonded (block_overturn), and refused once one is
+    (bonded_wall_surge)."""
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.io.checkpoint import ADDED_OPTIONS, accepted_fingerprints, case_fingerprint
+    keys = [(sec, key) for sec, key, _ in ADDED_OPTIONS]
+    before = tuple(keys[keys.index(("dem.blocks[]", "bonded")):])
+    plain = load_case(root / "cases" / "block_overturn.yaml")
+    old = case_fingerprint(plain, without=before)
+    assert old != case_fingerprint(plain) and old in accepted_fingerprints(plain)
+    bonded = load_case(root / "cases" / "bonded_wall_surge.yaml")
+    assert any(b.bonded for b in bonded.dem.blocks)
+    assert case_fingerprint(bonded, without=before) not in accepted_fingerprints(bonded)

@@ -45,6 +45,7 @@ class BlockConfig:
     velocity: Vec3 = param((0.0, 0.0, 0.0), unit="m/s", doc="initial velocity")
     omega: Vec3 = param((0.0, 0.0, 0.0), unit="rad/s", doc="initial angular velocity (world frame)")
     fixed: bool = param(False, doc="block never moves (acts as a wall)")
+    bonded: bool = param(False, doc="bond this box by the cohesive law dem.cohesive to every other bonded box it shares a face with (boxes not rotated, angle 0)")
 
     def __post_init__(self) -> None:
         if self.shape == "box" and (self.size is None or self.radius is None):
@@ -59,6 +60,9 @@ class BlockConfig:
             raise ConfigError(f"key 'dem.blocks[].size' = {self.size} is thinner than 2·radius = {2 * self.radius}")
         if sum(a * a for a in self.axis) == 0:
             raise ConfigError("key 'dem.blocks[].axis' must not be the zero vector")
+        if self.bonded and (self.shape != "box" or self.angle % 360.0 != 0.0):
+            raise ConfigError(f"key 'dem.blocks[].bonded' needs an unrotated box (shape 'box', angle 0); "
+                              f"got shape {self.shape!r}, angle {self.angle}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -131,7 +135,7 @@ class DEMConfig:
     walls: tuple[WallConfig, ...] = param((), doc="static walls")
     controls: tuple[ControlConfig, ...] = param((), doc="controlled blocks")
     structure: StructureConfig | None = param(None, doc="a bonded-block building from the structure builder (its blocks follow blocks and generators)")
-    cohesive: CohesiveConfig | None = param(None, doc="cohesive law of the bonds between the structure's blocks (required with structure)")
+    cohesive: CohesiveConfig | None = param(None, doc="cohesive law of the bonds between the structure's blocks and between bonded blocks (required with either)")
     ledger_every: int = param(100, unit="steps", doc="energy-ledger and force–displacement CSV row every this many DEM steps", ge=1)
 
     def __post_init__(self) -> None:
@@ -147,6 +151,9 @@ class DEMConfig:
             used.append(("dem.structure.material", self.structure.material))
             if self.cohesive is None:
                 raise ConfigError("key 'dem.cohesive' is required when dem.structure is given")
+        bonded = [i for i, b in enumerate(self.blocks) if b.bonded]
+        if bonded and self.cohesive is None:
+            raise ConfigError(f"key 'dem.cohesive' is required when dem.blocks{bonded} are bonded")
         for key, name in used:
             if name not in names:
                 raise ConfigError(f"key '{key}' = {name!r} is not a defined material ({', '.join(names)})")

@@ -327,6 +327,8 @@ class DEMSubcycler:
             self.system.step()
             v_sum += st.vel      # leapfrog: x_{k+1} = x_k + dt v_{k+1/2}, so Σ v dt is the displacement
             w_sum += st.omega
+            if not np.isfinite(st.pos).all():
+                break            # diverged: the next step's neighbour search cannot grid NaN; the caller names the block
         wall = time.perf_counter() - wall0
         st.ext_force[:], st.ext_torque[:] = F1, T1
         self.last = Exchange(n, impulse, angular, wall, dt / self.system.critical_time_step())

@@ -2,6 +2,7 @@
 stable-time-step check (tutorial §6)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -167,8 +168,9 @@ def build_system(cfg: DEMConfig, with_ledger: bool = True) -> DEMSystem:
     walls = walls_of(cfg, mats, state.ns, cfg.clip_normal)
     if walls is not None:
         inter.append(walls)
-    if structure is not None:
-        inter.append(structure_bonds(cfg, structure, first_block=state.nb - structure.nb))
+    bonds = cohesive_bonds(cfg, state, structure)
+    if bonds is not None:
+        inter.append(bonds)
     controls = None
     if cfg.controls:
         controls = Controls([Control(c.block, tuple(c.modes), tuple(c.values), c.ramp) for c in cfg.controls], state)
@@ -177,16 +179,30 @@ def build_system(cfg: DEMConfig, with_ledger: bool = True) -> DEMSystem:
     return system
 
 
-def structure_bonds(cfg: DEMConfig, structure, first_block: int):
-    """Cohesive bonds on the structure's shared faces, block indices shifted to the state's."""
-    import dataclasses
+def bonded_block_faces(cfg: DEMConfig) -> list:
+    """Faces shared by the ``bonded`` boxes of ``dem.blocks`` (block indices = their order there,
+    which is their index in the state)."""
+    from .builder import touching_faces
+    idx = [i for i, b in enumerate(cfg.blocks) if b.bonded]
+    if len(idx) < 2:
+        return []
+    centre = np.array([cfg.blocks[i].position for i in idx], float)
+    half = 0.5 * np.array([cfg.blocks[i].size for i in idx], float)
+    return [dataclasses.replace(f, a=idx[f.a], b=idx[f.b]) for f in touching_faces(centre - half, centre + half)]
+
+
+def cohesive_bonds(cfg: DEMConfig, state: DEMState, structure=None):
+    """One set of cohesive bonds on the faces of the bonded blocks and of the structure (its
+    block indices shifted to the state's: it comes last), in the built, stress-free
+    configuration; None when there are none."""
     from .cohesive import CohesiveBonds, CohesiveLaw
-    faces = [dataclasses.replace(f, a=f.a + first_block, b=f.b + first_block) for f in structure.faces]
-    pos = np.zeros((first_block + structure.nb, 3))
-    pos[first_block:] = structure.pos
-    quat = np.zeros((first_block + structure.nb, 4))
-    quat[:, 0] = 1.0
-    return CohesiveBonds.from_faces(CohesiveLaw.from_config(cfg.cohesive), faces, pos, quat,
+    faces = bonded_block_faces(cfg)
+    if structure is not None:
+        first = state.nb - structure.nb
+        faces += [dataclasses.replace(f, a=f.a + first, b=f.b + first) for f in structure.faces]
+    if not faces:
+        return None
+    return CohesiveBonds.from_faces(CohesiveLaw.from_config(cfg.cohesive), faces, state.pos, state.quat,
                                     cfg.cohesive.points_per_edge)
 
 

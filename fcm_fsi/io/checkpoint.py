@@ -26,10 +26,23 @@ from ..config.loader import ConfigError, to_dict
 # Options added after checkpoints were already being written, with the value that does what
 # the code did before the option existed. A checkpoint hashed without such an option is still
 # accepted when the case leaves the option at that value (and only then). Add new options here.
+# The section is a dotted path; a trailing "[]" names a list whose every entry has the option.
 ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("coupling", "load_split", "owner"),        # session 14
     ("coupling", "wall_motion", "block"),       # session 15
+    ("dem.blocks[]", "bonded", False),          # session 16
 )
+
+
+def _option_holders(data: dict, section: str) -> list[dict]:
+    """The mappings of the resolved case ``data`` that hold the options of ``section`` (a
+    dotted path; ``name[]`` = every entry of that list); none where the section is absent."""
+    holders = [data]
+    for part in section.split("."):
+        many = part.endswith("[]")
+        nxt = [h.get(part[:-2] if many else part) for h in holders]
+        holders = [e for v in nxt if v for e in (v if many else [v])]
+    return holders
 
 
 def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str], ...] = ()) -> str:
@@ -47,7 +60,8 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
             for key in keys:
                 (data.get(section) or {}).pop(key, None)
     for section, key in without:
-        (data.get(section) or {}).pop(key, None)
+        for holder in _option_holders(data, section):
+            holder.pop(key, None)
     data.pop("output", None)
     data.pop("description", None)
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
@@ -60,7 +74,7 @@ def accepted_fingerprints(case) -> tuple[str, ...]:
     old-behaviour values."""
     data = to_dict(case)
     options = [(sec, key) for sec, key, _ in ADDED_OPTIONS]
-    at_old = [(data.get(sec) or {}).get(key, value) == value for sec, key, value in ADDED_OPTIONS]
+    at_old = [all(h.get(key, value) == value for h in _option_holders(data, sec)) for sec, key, value in ADDED_OPTIONS]
     out = []
     for k in range(len(options), -1, -1):           # k = len: nothing left out (current code)
         if not all(at_old[k:]):

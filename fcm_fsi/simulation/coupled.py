@@ -456,6 +456,8 @@ class CoupledModel:
                 with timer("cut rebuild"):
                     self.stats = self.rebuild_cut(velocities=guess)
                 F, fluid_side = self._fluid_then_dem(t, dt, timer)
+                if not (np.isfinite(st.pos).all() and np.isfinite(st.vel).all()):
+                    self._check_dem(t + dt)              # a diverged pass stops the run, naming the block
                 result = self._block_velocities()
                 r = result - guess
                 scale = max(float(np.abs(result).max(initial=0.0)), cp.iteration_velocity)

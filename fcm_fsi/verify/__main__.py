@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from ..io.logging import setup_logging
-from .registry import load_all, set_resume
+from .registry import load_all, set_ranks_per_run, set_resume
 
 
 def _mpirun(np_: int) -> list[str]:
@@ -52,7 +52,7 @@ def format_table(name: str, level: str, ranks: int, wall: float, metrics: dict) 
 
 
 def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNING",
-            resume: bool = False) -> bool:
+            resume: bool = False, ranks_per_run: int = 1) -> bool:
     """Run a case (re-launching under mpirun when np_ > 1); returns True when all metrics pass."""
     cases = load_all()
     if name not in cases:
@@ -61,12 +61,14 @@ def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNIN
         env = mpi_env()
         env["FCM_FSI_VERIFY_INNER"] = "1"
         cmd = _mpirun(np_) + [sys.executable, "-m", "fcm_fsi.verify", name, "--level", level,
-                             "--out", str(out), "--np", str(np_), "--log-level", log_level] + (["--resume"] if resume else [])
+                             "--out", str(out), "--np", str(np_), "--log-level", log_level,
+                             "--ranks-per-run", str(ranks_per_run)] + (["--resume"] if resume else [])
         rc = subprocess.call(cmd, env=env)
         return rc == 0
     from mpi4py import MPI
     comm = MPI.COMM_WORLD
     set_resume(resume)
+    set_ranks_per_run(ranks_per_run)
     case_dir = out / name
     if comm.rank == 0:
         case_dir.mkdir(parents=True, exist_ok=True)
@@ -124,7 +126,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="progress messages of the cases (INFO: e.g. per-cycle progress of long runs)")
     ap.add_argument("--resume", action="store_true",
                     help="runs with a checkpoint.h5 of their own case under --out continue from it")
+    ap.add_argument("--ranks-per-run", type=int, default=1,
+                    help="cases made of several independent runs (block_overturn): ranks per run; "
+                         "1 runs them side by side, --np runs them in turn on all ranks")
     args = ap.parse_args(argv)
+    if args.ranks_per_run < 1:
+        ap.error(f"--ranks-per-run must be at least 1, got {args.ranks_per_run}")
     setup_logging(args.log_level)
     cases = load_all()
     if args.report is not None and not args.name:   # report of what is already under --out
@@ -139,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     ok = True
     for name in names:
         np_ = args.np if args.np is not None else cases[name].default_ranks if name in cases else 1
-        ok &= run_one(name, args.level, args.out, np_, args.log_level, args.resume)
+        ok &= run_one(name, args.level, args.out, np_, args.log_level, args.resume, args.ranks_per_run)
     if args.report is not None:
         write_report(args.out, args.report)
     return 0 if ok else 1

@@ -16,6 +16,7 @@ from typing import Callable, Literal
 Level = Literal["quick", "full"]
 
 _RESUME = False
+_RANKS_PER_RUN = 1
 
 
 def set_resume(flag: bool) -> None:
@@ -24,6 +25,18 @@ def set_resume(flag: bool) -> None:
     reboot loses at most one checkpoint interval)."""
     global _RESUME
     _RESUME = bool(flag)
+
+
+def set_ranks_per_run(k: int) -> None:
+    """``--ranks-per-run``: how many ranks each of a case's independent runs gets (cases
+    that run several, e.g. ``block_overturn``'s three frictions; 1 = side by side)."""
+    global _RANKS_PER_RUN
+    _RANKS_PER_RUN = max(1, int(k))     # the CLI refuses k < 1 with a message
+
+
+def ranks_per_run() -> int:
+    """The ``--ranks-per-run`` setting (default 1)."""
+    return _RANKS_PER_RUN
 
 
 def resume_checkpoint(run_dir: Path) -> str | None:
