@@ -185,9 +185,10 @@ def _plot(out: Path, t, draft, draft_wall, draft_ref, period, t_est) -> None:
     plt.close(fig)
 
 
-def rotation_angle_z(bodies: Path, block: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(t, rotation angle about z [deg], unwrapped) of one block from ``bodies.csv``."""
-    b = read_series(bodies)
+def rotation_angle_z(bodies: Path | dict, block: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(t, rotation angle about z [deg], unwrapped) of one block from ``bodies.csv`` (its
+    path, or the series already read)."""
+    b = read_series(bodies) if isinstance(bodies, Path) else bodies
     sel = b["block"] == block
     theta = 2.0 * np.arctan2(b["qz"][sel], b["qw"][sel])
     return b["t"][sel], np.degrees(np.unwrap(theta))
@@ -357,9 +358,8 @@ def bonded_wall_surge(level, out_dir: Path, comm) -> list[Metric]:
     first = (int(breaks["block_a"][0]), int(breaks["block_b"][0])) if len(breaks.get("t", [])) else None
     t_first = float(breaks["t"][0]) if first else float("nan")
     blocks = data["dem"]["blocks"]
-    bricks = range(1, len(blocks))
-    turned = [float(abs(rotation_angle_z(run_dir / "bodies.csv", k)[1][-1])) for k in bricks]
     b = read_series(run_dir / "bodies.csv")
+    turned = [float(abs(rotation_angle_z(b, k)[1][-1])) for k in range(1, len(blocks))]
     top = len(blocks) - 1
     travel_top = float(np.hypot(b["x"][b["block"] == top][-1] - blocks[top]["position"][0],
                                 b["y"][b["block"] == top][-1] - blocks[top]["position"][1]))
@@ -387,9 +387,8 @@ def _plot_bonded_wall(out: Path, series, b, blocks, breaks) -> None:
     fig, ax = plt.subplots(1, 3, figsize=(13, 3.6))
     for k in range(1, len(blocks)):
         sel = b["block"] == k
-        theta = np.degrees(np.unwrap(2.0 * np.arctan2(b["qz"][sel], b["qw"][sel])))
         ax[0].plot(b["x"][sel], b["y"][sel], label=f"brick {k}")
-        ax[1].plot(b["t"][sel], theta, label=f"brick {k}")
+        ax[1].plot(*rotation_angle_z(b, k), label=f"brick {k}")
     ax[0].set_xlabel("x [m]"), ax[0].set_ylabel("y [m]"), ax[0].set_title("brick centres")
     ax[1].set_xlabel("t [s]"), ax[1].set_ylabel("rotation about z [deg]")
     ax[2].plot(series["t"], series["force_x"], label="fluid force on the wall, x [N]")
