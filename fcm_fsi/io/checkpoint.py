@@ -31,6 +31,7 @@ ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("coupling", "load_split", "owner"),        # session 14
     ("coupling", "wall_motion", "block"),       # session 15
     ("dem.blocks[]", "bonded", False),          # session 16
+    ("coupling", "added_mass_model", "volume"),  # session 17
 )
 
 
@@ -127,6 +128,20 @@ def write_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str, step: int, ti
                 f.create_dataset(f"globals/{name}", data=a)
         os.replace(tmp, path)
     comm.barrier()
+
+
+def checkpoint_attributes(path: Path, comm: MPI.Comm) -> dict:
+    """The attributes of a checkpoint (step, time, dt, ranks, fingerprint, format) without its
+    fields, on any rank count. Collective; {} when the file cannot be read."""
+    attrs = {}
+    if comm.rank == 0:
+        import h5py
+        try:
+            with h5py.File(Path(path), "r") as f:
+                attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+        except OSError:
+            pass
+    return comm.bcast(attrs, root=0)
 
 
 def read_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str | tuple[str, ...]) -> Checkpoint:

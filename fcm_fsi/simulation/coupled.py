@@ -94,6 +94,8 @@ class CoupledModel:
         self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
         self._remember_own_inertia(case)
         self.added_mass = np.zeros(self.nb)         # m̃ per block, set every step (_update_added_mass)
+        self.added_inertia = np.zeros((self.nb, 3))  # Ĩ per block (body axes)
+        self._potential = None                       # added_mass_model: potential (built at first use)
         self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
         self.alpha_ang = np.zeros((self.nb, 3))
         self.relaxed_load = np.zeros((2 * self.nb, 3))   # force; torque applied last step (force_relaxation)
@@ -182,6 +184,12 @@ class CoupledModel:
                               ("tx", "N m"), ("ty", "N m"), ("tz", "N m")):
                 cols[key] = unit
             self.bodies_csv = TimeSeriesCSV(Path(out_dir) / "bodies.csv", cols, comm.rank, lazy=True)
+        self.added_mass_csv = None
+        if out_dir is not None and case.coupling.added_mass_model == "potential" and case.coupling.added_mass > 0:
+            from ..io.csv import TimeSeriesCSV
+            self.added_mass_csv = TimeSeriesCSV(Path(out_dir) / "added_mass.csv",
+                                                {"t": "s", "block": "-", "m_tilde": "kg", "i_tilde": "kg m^2",
+                                                 "solves": "-"}, comm.rank, lazy=True)
         self.breaks_csv = None
         if out_dir is not None and self.bonds is not None:
             from ..io.csv import TimeSeriesCSV
@@ -223,14 +231,69 @@ class CoupledModel:
         ca = self.case.coupling.added_mass
         if ca == 0.0:
             return
-        # (negative fitted surface weights can overshoot a sharp ρ jump slightly: clip at 0)
-        rho_bar = np.maximum(np.nan_to_num(self.cut.wetted_mean(self.nb, self._rho_field), nan=0.0), 0.0)
         st = self.system.state
-        extra = ca * rho_bar * self.volume_b
-        extra[st.fixed] = 0.0
-        self.added_mass = extra
+        if self.case.coupling.added_mass_model == "potential":
+            extra, extra_inertia = self._potential_added_mass(ca)
+        else:
+            # (negative fitted surface weights can overshoot a sharp ρ jump slightly: clip at 0)
+            rho_bar = np.maximum(np.nan_to_num(self.cut.wetted_mean(self.nb, self._rho_field), nan=0.0), 0.0)
+            extra = ca * rho_bar * self.volume_b
+            extra[st.fixed] = 0.0
+            extra_inertia = extra[:, None] * self.gyration_sq
+        self.added_mass, self.added_inertia = extra, extra_inertia
         st.mass[:] = self.mass0 + extra
-        st.inertia[:] = self.inertia0 + extra[:, None] * self.gyration_sq
+        st.inertia[:] = self.inertia0 + extra_inertia
+
+    def _potential_added_mass(self, factor: float) -> tuple[np.ndarray, np.ndarray]:
+        """``added_mass_model: potential``: m̃ (nb,) [kg] and Ĩ (nb, 3) [kg m²] per block from
+        the added-mass tensor M of each moving group (block, or bonded cluster with
+        ``wall_motion: bonded_cluster``) on the current cut (``coupling/added_mass.py``):
+        m̃_group = factor × λ_max(M_translation), shared over its blocks by fluid-seen volume;
+        the rotational λ_max(M_rotation) about the group's centre of mass, less what the shared
+        m̃ already gives at the blocks' offsets, shared alike as Ĩ on every axis. Groups
+        holding a fixed block get none. Writes added_mass.csv."""
+        from ..coupling.added_mass import PotentialAddedMass, largest_eigenvalue
+        st = self.system.state
+        if self._potential is None:
+            self._potential = PotentialAddedMass(self.cut, self._rho_field, self.ns.bc_set.natural_facets)
+        pot = self._potential
+        labels = self._cluster_labels()
+        groups = [g for g in np.unique(labels) if not st.fixed[labels == g].any()]
+        extra, extra_inertia = np.zeros(self.nb), np.zeros((self.nb, 3))
+        if not groups:
+            return extra, extra_inertia
+        pot.assemble()
+        ncell = len(self.cut.cell_owner)
+        owner, second, share = self.cut.cell_owner, self.cut.cell_second, self.cut.cell_share
+        weights = np.zeros((len(groups), ncell))
+        centres = np.zeros((len(groups), 3))
+        for i, g in enumerate(groups):
+            inside = labels == g
+            in_first = (owner >= 0) & inside[np.maximum(owner, 0)]
+            in_second = (second >= 0) & inside[np.maximum(second, 0)]
+            weights[i] = np.where(in_first, 1.0 - share, 0.0) + np.where(in_second, share, 0.0)
+            m = self.mass0[inside]
+            centres[i] = (m[:, None] * st.pos[inside]).sum(axis=0) / m.sum()
+        M = pot.tensors(weights, centres) * self.depth
+        d = self.gdim
+        m_group = factor * largest_eigenvalue(M[:, :d, :d])
+        j_group = factor * largest_eigenvalue(M[:, d:, d:])
+        for i, g in enumerate(groups):
+            blocks = np.flatnonzero(labels == g)
+            share_b = self.volume_b[blocks] / self.volume_b[blocks].sum()
+            extra[blocks] = m_group[i] * share_b
+            r = st.pos[blocks] - centres[i]
+            if d == 2:
+                carried = float((extra[blocks] * (r[:, 0] ** 2 + r[:, 1] ** 2)).sum())
+            else:       # about the axis where the shared masses carry least
+                carried = float(min((extra[blocks] * ((r ** 2).sum(axis=1) - r[:, k] ** 2)).sum() for k in range(3)))
+            extra_inertia[blocks] = max(j_group[i] - carried, 0.0) * share_b[:, None]
+        if self.added_mass_csv is not None:
+            for b in range(self.nb):
+                if extra[b] > 0:
+                    self.added_mass_csv.write(t=self.ns.t, block=b, m_tilde=extra[b], i_tilde=extra_inertia[b].max(),
+                                              solves=pot.last_solves)
+        return extra, extra_inertia
 
     def _stabilised_load(self) -> tuple[np.ndarray, np.ndarray]:
         """Fluid load (relaxed: ω F + (1 − ω) × the last relaxed load) + m̃ aⁿ − m̃ g and
@@ -245,10 +308,14 @@ class CoupledModel:
             return force.copy(), torque.copy()
         st = self.system.state
         g = np.asarray(self.case.dem.gravity)
-        F = force + self.added_mass[:, None] * (self.accel - g[None, :])
+        accel, alpha = self.accel, self.alpha_ang
+        if self.case.coupling.added_mass_model == "potential" and self._by_cluster():
+            # the fluid answers the cluster's rigid acceleration (the motion it sees), not the bonds' ringing
+            X, A, Al = self._cluster_rigid(st.pos, self.accel, self.alpha_ang)
+            accel, alpha = A + np.cross(Al, st.pos - X), Al
+        F = force + self.added_mass[:, None] * (accel - g[None, :])
         R = st.rotation_matrices()
-        I_tilde = self.added_mass[:, None] * self.gyration_sq
-        body = np.einsum("bji,bj->bi", R, self.alpha_ang) * I_tilde
+        body = np.einsum("bji,bj->bi", R, alpha) * self.added_inertia
         T = torque + np.einsum("bij,bj->bi", R, body)
         return F, T
 
@@ -331,15 +398,32 @@ class CoupledModel:
         else:
             v = velocities.reshape(2 * self.nb, 3)
             X, V, W = st.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None]
-        if self.case.coupling.wall_motion == "bonded_cluster" and self.bonds is not None:
-            from ..coupling.dem_side import bonded_clusters, cluster_rigid_motion
-            first = np.unique(self.bonds.pt_bond, return_index=True)[1]      # one point per bond
-            intact = ~self.bonds.broken_bonds()[self.bonds.pt_bond[first]]
-            labels = bonded_clusters(self.nb, self.bonds.pt_a[first], self.bonds.pt_b[first], intact)
-            R = st.rotation_matrices()
-            inertia_world = np.einsum("bij,bj,bkj->bik", R, self.inertia0, R)
-            X, V, W = cluster_rigid_motion(X, V, W, self.mass0, inertia_world, labels, st.fixed)
+        if self._by_cluster():
+            X, V, W = self._cluster_rigid(X, V, W)
         return X, V, W
+
+    def _by_cluster(self) -> bool:
+        """Whether the fluid sees bonded clusters (``coupling.wall_motion: bonded_cluster``)."""
+        return self.case.coupling.wall_motion == "bonded_cluster" and self.bonds is not None
+
+    def _cluster_labels(self) -> np.ndarray:
+        """(nb,) label of each block's cluster: blocks joined by intact bonds (each block its
+        own without ``wall_motion: bonded_cluster``)."""
+        if not self._by_cluster():
+            return np.arange(self.nb)
+        from ..coupling.dem_side import bonded_clusters
+        first = np.unique(self.bonds.pt_bond, return_index=True)[1]      # one point per bond
+        intact = ~self.bonds.broken_bonds()[self.bonds.pt_bond[first]]
+        return bonded_clusters(self.nb, self.bonds.pt_a[first], self.bonds.pt_b[first], intact)
+
+    def _cluster_rigid(self, X, V, W):
+        """Per block, the rigid motion (or rigid acceleration: V, W = a, α) of its bonded cluster
+        (``dem_side.cluster_rigid_motion``)."""
+        from ..coupling.dem_side import cluster_rigid_motion
+        st = self.system.state
+        R = st.rotation_matrices()
+        inertia_world = np.einsum("bij,bj,bkj->bik", R, self.inertia0, R)
+        return cluster_rigid_motion(X, V, W, self.mass0, inertia_world, self._cluster_labels(), st.fixed)
 
     def _rigid_velocity(self, points: np.ndarray, owner: np.ndarray, motion) -> np.ndarray:
         """Wall velocity (n, gdim) [m/s] at ``points`` of the blocks ``owner`` (0 where < 0) from
@@ -709,7 +793,7 @@ class CoupledModel:
         if self.blocks_dir is not None:                    # the collection continues from the checkpoint
             from ..dem.output import read_pvd
             self.blocks_pvd = read_pvd(self.blocks_dir / "blocks.pvd", checkpoint.time)
-        for csv in (self.bodies_csv, self.breaks_csv):     # continue the earlier run's files
+        for csv in (self.bodies_csv, self.breaks_csv, self.added_mass_csv):   # continue the earlier run's files
             if csv is not None:
                 csv.resume(checkpoint.time)
         if self.bonds is not None:                         # bonds broken before the checkpoint are not new

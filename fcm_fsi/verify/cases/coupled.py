@@ -22,6 +22,7 @@ import yaml
 from mpi4py import MPI
 
 from ...config.case import apply_resolution
+from ...io.checkpoint import accepted_fingerprints, checkpoint_attributes
 from ...simulation.coupled import CoupledModel
 from ...io.logging import get_logger
 from ...simulation.loop import SimulationDiverged, TimeLoop
@@ -61,16 +62,31 @@ def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.nda
     """Run a coupled case mapping; returns its series (all ranks), the wall time [s] and the
     divergence message (None when the run reached t_end)."""
     case, sub = case_output(data, out, comm)
+    restart = resume_checkpoint(sub)
+    if restart is not None and finished(restart, case, comm):
+        # a run that already reached t_end is read, not re-run: on any number of ranks (the
+        # checkpoint's rank count binds only a run that continues); its wall time is not known here
+        log.info("%s: its checkpoint is at t_end = %g s; reading its outputs", data["name"], case.run.t_end)
+        return read_series(sub / "series.csv"), float("nan"), None
     t0 = time.perf_counter()
     model = CoupledModel(case, comm, out_dir=sub)
     failure = None
     try:
-        TimeLoop(case, model, sub, comm, restart=resume_checkpoint(sub)).run()
+        TimeLoop(case, model, sub, comm, restart=restart).run()
     except SimulationDiverged as err:
         failure = str(err)
         log.error("%s diverged: %s", data["name"], failure)
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     return read_series(sub / "series.csv"), wall, failure
+
+
+def finished(checkpoint: str, case, comm: MPI.Comm) -> bool:
+    """Whether ``checkpoint`` is this case's (fingerprint) and was written at its t_end (the
+    loop writes one at the end)."""
+    a = checkpoint_attributes(Path(checkpoint), comm)
+    t_end = case.run.t_end
+    return (a.get("fingerprint") in accepted_fingerprints(case)
+            and float(a.get("time", -np.inf)) >= t_end - 1e-9 * max(1.0, abs(t_end)))
 
 
 def split_for_runs(comm: MPI.Comm, n_runs: int, ranks_per_run: int | None = None) -> tuple[MPI.Comm, list[int]]:
