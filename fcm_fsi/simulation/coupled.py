@@ -96,6 +96,7 @@ class CoupledModel:
         self.added_mass = np.zeros(self.nb)         # m̃ per block, set every step (_update_added_mass)
         self.added_inertia = np.zeros((self.nb, 3))  # Ĩ per block (body axes)
         self._potential = None                       # added_mass_model: potential (built at first use)
+        self._energy_limit = None                    # health(): set at the first check
         self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
         self.alpha_ang = np.zeros((self.nb, 3))
         self.relaxed_load = np.zeros((2 * self.nb, 3))   # force; torque applied last step (force_relaxation)
@@ -728,7 +729,48 @@ class CoupledModel:
         return self.comm.allreduce(fem.assemble_scalar(self._water_forms[2]), op=MPI.SUM)
 
     def health(self, diag: dict[str, float]) -> str | None:
-        return self.fluid.health(diag)
+        """The fluid's checks, then the energy bound (:meth:`_energy_bound`)."""
+        problem = self.fluid.health(diag)
+        if problem is None and "kinetic_energy" in diag:
+            if self._energy_limit is None:
+                self._energy_limit = self._energy_bound(diag["kinetic_energy"])
+            total = diag["kinetic_energy"] + self._block_kinetic_energy()
+            if self._energy_limit is not None and total > self._energy_limit:
+                unit = "J" if self.gdim == 3 else "J/m"
+                problem = (f"kinetic energy of fluid and blocks {total:.4g} {unit} exceeds all the energy the system "
+                           f"has, {self._energy_limit:.4g} {unit} (kinetic energy at the start + g × its mass × the "
+                           "domain's height): the coupling has diverged")
+        return problem
+
+    def _block_kinetic_energy(self) -> float:
+        """Kinetic energy of the blocks [J; per unit depth in 2D, like the fluid's]."""
+        st = self.system.state
+        R = st.rotation_matrices()
+        w_body = np.einsum("bji,bj->bi", R, st.omega)
+        e = 0.5 * (self.mass0 * (st.vel ** 2).sum(axis=1) + (self.inertia0 * w_body ** 2).sum(axis=1))
+        return float(e[~st.fixed].sum()) / self.depth
+
+    def _energy_bound(self, fluid_kinetic: float) -> float | None:
+        """An upper bound of the kinetic energy of fluid and blocks: what they have now plus g ×
+        their mass × the mesh's height along g (nothing can fall further). Without inflow
+        boundaries no energy enters (slip, no-slip and do-nothing walls; damping zones only
+        take it out), so exceeding it means the run has diverged — the check that stops a run
+        whose loads and speeds have run away while φ and the block steps stay in range
+        (docs/coupling.md, session 17). None (no check) with inflow boundaries."""
+        fl = self.case.fluid
+        if any(bc.kind in ("velocity", "parabolic_inflow") for bc in fl.boundaries):
+            return None
+        g = np.asarray(fl.gravity, float)
+        gn = float(np.linalg.norm(g))
+        x = self.mesh.geometry.x[:, : self.gdim]
+        along = x @ (g / gn) if gn > 0 else np.zeros(len(x))
+        lo = self.comm.allreduce(float(along.min(initial=np.inf)), op=MPI.MIN)
+        hi = self.comm.allreduce(float(along.max(initial=-np.inf)), op=MPI.MAX)
+        rho = self._rho_field
+        mass = self.comm.allreduce(fem.assemble_scalar(fem.form(rho * ufl.dx(domain=self.mesh))), op=MPI.SUM)
+        moving = ~self.system.state.fixed
+        mass += float(self.mass0[moving].sum()) / self.depth
+        return fluid_kinetic + self._block_kinetic_energy() + gn * mass * (hi - lo)
 
     def dem_arrays(self) -> dict[str, np.ndarray]:
         """Copies of everything the DEM side carries between steps (state, contact histories,
