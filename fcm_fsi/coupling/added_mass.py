@@ -100,6 +100,7 @@ class PotentialAddedMass:
         self._dg0_dofs = D0.dofmap.list.array           # cell → DG0 dof (owned cells first)
         self._b = [fem.petsc.create_vector(fem.form(q * cut.dx)) for _ in range(rigid_modes(gdim))]
         self._p = self._b[0].duplicate()
+        self._tmp = self._b[0].duplicate()
         self.last_solves = 0
 
     def assemble(self) -> None:
@@ -128,7 +129,7 @@ class PotentialAddedMass:
         for g in range(ng):
             self.chi.x.array[:] = 0.0
             self.chi.x.array[dofs] = weights[g][:own]
-            chi = self.chi.vector
+            chi, tmp = self.chi.vector, self._tmp
             X = np.asarray(centres[g], float)
             for k in range(nm):
                 b = self._b[k]
@@ -138,22 +139,18 @@ class PotentialAddedMass:
                     # rotation about X: (x − X) × n = x × n − X × n
                     if gdim == 2:
                         self._C[2].multTranspose(chi, b)
-                        tmp = b.duplicate()
                         self._C[1].multTranspose(chi, tmp)            # − X n_y
                         b.axpy(-X[0], tmp)
                         self._C[0].multTranspose(chi, tmp)            # + Y n_x
                         b.axpy(X[1], tmp)
-                        tmp.destroy()
                     else:
                         r = k - 3
                         self._C[3 + r].multTranspose(chi, b)
-                        tmp = b.duplicate()
                         i, j = (r + 1) % 3, (r + 2) % 3               # (X × n)_r = X_i n_j − X_j n_i
                         self._C[j].multTranspose(chi, tmp)
                         b.axpy(-X[i], tmp)
                         self._C[i].multTranspose(chi, tmp)
                         b.axpy(X[j], tmp)
-                        tmp.destroy()
                 b.scale(-1.0)                                         # rhs −∫ (m·n) q dΓ
                 fem.petsc.set_bc(b, [self._bc])
             norms = [b.norm() for b in self._b]
@@ -170,7 +167,7 @@ class PotentialAddedMass:
         return 0.5 * (out + out.transpose(0, 2, 1))
 
     def destroy(self) -> None:
-        for obj in [self._A, self._ksp, self._p, *self._C, *self._b]:
+        for obj in [self._A, self._ksp, self._p, self._tmp, *self._C, *self._b]:
             obj.destroy()
 
 
