@@ -277,8 +277,9 @@ OVERTURN_FRICTION = (30.0, 20.0, 15.0)
 @register("block_overturn", "surge overturns a mortar block over a stopper; sliding after toppling grows as "
                             "friction falls (paper §4(3), 2D fluid)", issue=8)
 def block_overturn(level, out_dir: Path, comm) -> list[Metric]:
-    """``cases/block_overturn.yaml`` at friction 30°, 20° and 15°: quick 128 × 48 cells
-    (h = 12.5 mm, the block 4 cells long) to t = 1.0 s, full 320 × 120 (5 mm) to 1.2 s.
+    """``cases/block_overturn.yaml`` at friction 30°, 20° and 15°: quick 160 × 48 cells
+    (h = 12.6 mm, the block 4 cells long) to t = 1.0 s, full 400 × 120 (5 mm) to 1.2 s, in a
+    2.01 m channel whose end reflects the bore back to the block only after t_end.
 
     The tracked point is the block's upstream top corner (the paper's Fig. 15–16 plot a point
     on the block). overturned = 1 when, at every friction, the block ends turned by more than
@@ -290,7 +291,7 @@ def block_overturn(level, out_dir: Path, comm) -> list[Metric]:
     results = {}
     sub, mine = split_for_runs(comm, len(OVERTURN_FRICTION))
     for phi in (OVERTURN_FRICTION[i] for i in mine):
-        data = case_at_level("block_overturn", level, out_dir, shorter_coarser(1.0, [128, 48]))
+        data = case_at_level("block_overturn", level, out_dir, shorter_coarser(1.0, [160, 48]))
         data["name"] = f"block_overturn_f{phi:g}"
         data["dem"]["materials"][0]["friction_angle"] = phi
         series, wall, failure = run_coupled(data, out_dir, sub)
