@@ -254,3 +254,37 @@ def test_verify_resume_reads_a_finished_run_instead_of_running_it_again(root, tm
         write_checkpoint(ck, comm, fingerprint, 10, t, 1e-3, {}, {})
         assert finished(str(ck), case, comm) is expected
     assert finished(str(tmp_path / "missing.h5"), case, comm) is False
+
+
+KILLED_WRITER = """
+import os, signal, sys
+from pathlib import Path
+from mpi4py import MPI
+from dolfinx import fem, mesh
+from fcm_fsi.io.fields import FieldWriter
+msh = mesh.create_unit_square(MPI.COMM_WORLD, 16, 16)
+phi = fem.Function(fem.FunctionSpace(msh, ("CG", 1)), name="phi")
+writer = FieldWriter(Path(sys.argv[1]), msh, [phi])
+for k in range(3):
+    phi.x.array[:] = k
+    writer.write(0.1 * k)
+os.kill(os.getpid(), signal.SIGKILL)     # a crash: no close, no atexit
+"""
+
+
+def test_field_output_of_a_killed_run_stays_readable(tmp_path):
+    """A run killed between outputs (SIGKILL, nothing closed) keeps every completed output
+    time readable in fields.h5 and listed in fields.xdmf (before: the open HDF5 file was
+    unreadable as a whole after a kill)."""
+    import subprocess
+    import sys
+    script = tmp_path / "writer.py"
+    script.write_text(KILLED_WRITER)
+    proc = subprocess.run([sys.executable, str(script), str(tmp_path / "fields.xdmf")], capture_output=True)
+    assert proc.returncode == -9, proc.stderr.decode()[-2000:]
+    with h5py.File(tmp_path / "fields.h5", "r") as f:
+        times = sorted(f["Function/phi"].keys())
+        last = f["Function/phi"][times[-1]][...]
+    assert len(times) == 3
+    assert np.allclose(last, 2.0, rtol=0, atol=1e-12)
+    assert (tmp_path / "fields.xdmf").read_text().count("<Time") == 3

