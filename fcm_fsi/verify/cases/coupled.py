@@ -339,7 +339,7 @@ def _plot_block_overturn(out: Path, results: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(1, 3, figsize=(13, 3.6))
-    for phi, r in results.items():
+    for phi, r in sorted(results.items(), reverse=True):       # 30°, 20°, 15° whatever rank ran them
         ax[0].plot(r["t"], r["dx"], label=f"friction {phi:g}°")
         ax[1].plot(r["t"], r["dy"], label=f"friction {phi:g}°")
         ax[2].plot(r["t"], r["theta"], label=f"friction {phi:g}°")
