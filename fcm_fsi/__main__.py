@@ -11,6 +11,7 @@ from pathlib import Path
 
 EXIT_BAD_INPUT = 2
 EXIT_DIVERGED = 3
+EXIT_STOPPED = 4        # stopped on request (STOP file, SIGTERM/SIGUSR1) with a checkpoint
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -99,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     write_resolved_case(case, out, comm.rank)
     comm.barrier()
     log.info("case %s (%s) on %d rank(s) -> %s", case.name, case.physics, comm.size, out)
-    from .simulation.loop import SimulationDiverged   # imports PETSc, and with it the BLAS
+    from .simulation.loop import SimulationDiverged, StopRequested   # imports PETSc, and with it the BLAS
     if reference_blas_loaded():
         log.warning("running on the reference BLAS: direct (MUMPS) solves are about 3x slower; "
                     "install libopenblas0-serial (.ci/setup.sh, docs/performance.md)")
@@ -112,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
     except (SimulationDiverged, FloatingPointError) as err:
         log.error("run stopped: %s", err)
         return EXIT_DIVERGED
+    except StopRequested as err:
+        log.warning("%s", err)
+        return EXIT_STOPPED
     return 0
 
 

@@ -288,3 +288,61 @@ def test_field_output_of_a_killed_run_stays_readable(tmp_path):
     assert len(times) == 3
     assert np.allclose(last, 2.0, rtol=0, atol=1e-12)
     assert (tmp_path / "fields.xdmf").read_text().count("<Time") == 3
+
+
+@pytest.mark.mpi
+def test_stop_file_ends_the_run_with_a_checkpoint_that_continues_it(tmp_path):
+    """A STOP file in the output folder ends the run after the current step on every rank
+    (exit 4, a message naming the checkpoint), with a checkpoint at that step and the file
+    removed; --restart from it then reaches the uninterrupted run's end state."""
+    case = tmp_path / "case.yaml"
+    data = dict(CASE, run=dict(CASE["run"], t_end=0.1))
+    case.write_text(yaml.safe_dump(data))
+    full = run_cli([str(case), "--output", str(tmp_path / "full")], 2)
+    assert full.returncode == 0, full.stderr
+    out = tmp_path / "stopped"
+    out.mkdir()
+    (out / "STOP").touch()
+    stopped = run_cli([str(case), "--output", str(out)], 2)
+    assert stopped.returncode == 4, stopped.stderr
+    said = stopped.stdout + stopped.stderr
+    assert "stopped on request" in said and "--restart" in said
+    assert "Traceback" not in stopped.stderr
+    assert not (out / "STOP").exists()
+    with h5py.File(out / "checkpoint.h5", "r") as f:
+        assert int(f.attrs["step"]) == 1
+    resumed = run_cli([str(case), "--output", str(out), "--restart", str(out / "checkpoint.h5")], 2)
+    assert resumed.returncode == 0, resumed.stderr
+    assert max_difference(final_phi(tmp_path / "full" / "checkpoint.h5"), final_phi(out / "checkpoint.h5")) < 1e-10
+    series = np.genfromtxt(out / "series.csv", delimiter=",", skip_header=1)
+    assert series.shape[0] == 6            # t = 0 and 5 steps, none repeated or lost
+
+
+def test_sigterm_ends_the_run_after_its_step_with_a_checkpoint(tmp_path):
+    """SIGTERM (a batch system's time limit, `kill`) mid-run: the step in progress completes,
+    a checkpoint is written at it, exit code 4."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from .conftest import ROOT, mpi_env
+    case = tmp_path / "case.yaml"
+    data = dict(CASE, run=dict(CASE["run"], t_end=200.0, checkpoint_every=100000, log_every=1000))
+    case.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "fcm_fsi", str(case), "--output", str(out)], cwd=ROOT,
+                            env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 300
+    while time.time() < deadline:          # wait for a few steps in the series
+        rows = (out / "series.csv").read_text().count("\n") if (out / "series.csv").exists() else 0
+        if rows >= 4 or proc.poll() is not None:
+            break
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGTERM)
+    log, err = proc.communicate(timeout=300)
+    assert proc.returncode == 4, err[-3000:]
+    assert "stopped on request (a signal" in log + err
+    with h5py.File(out / "checkpoint.h5", "r") as f:
+        step = int(f.attrs["step"])
+    series = np.genfromtxt(out / "series.csv", delimiter=",", skip_header=1)
+    assert step >= 3 and series.shape[0] == step + 1

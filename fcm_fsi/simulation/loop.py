@@ -3,11 +3,19 @@
 A model provides ``mesh``, ``output_functions``, ``series_units``, ``advance(t, dt)``,
 ``diagnostics()``, ``stable_dt()``, ``health()``, ``state()`` and ``load_state()``.
 The loop owns dt control, logging (rank 0), the CSV series, XDMF output, checkpoints,
-the stop on divergence (the last good checkpoint stays untouched) and the timing table.
+the stop on divergence (the last good checkpoint stays untouched), the stop on request and
+the timing table.
+
+Stop on request: a file named ``STOP`` in the output folder, or SIGTERM/SIGUSR1 to any rank
+(a batch system's time limit, ``kill``), ends the run after the current step with a checkpoint
+at that step, so no computed step is lost; the run then continues with ``--restart
+OUT/checkpoint.h5``. A second SIGTERM ends the process at once. The check is one small
+allreduce per step.
 """
 from __future__ import annotations
 
 import math
+import signal
 import time
 from pathlib import Path
 from typing import Protocol
@@ -29,6 +37,33 @@ log = get_logger("run")
 
 class SimulationDiverged(RuntimeError):
     """A step produced non-finite or out-of-bounds values; the message says where."""
+
+
+class StopRequested(RuntimeError):
+    """The run was asked to stop (STOP file or signal) and wrote a checkpoint; the message says
+    where and how to continue."""
+
+
+#: name of the file in the output folder that asks a running case to stop after its step
+STOP_FILE = "STOP"
+
+_signalled: list[int] = []
+
+
+def _on_signal(signum, frame) -> None:
+    """Note the request; a second SIGTERM falls back to the default action (end now)."""
+    _signalled.append(signum)
+    if signum == signal.SIGTERM:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def install_stop_handlers() -> None:
+    """SIGTERM and SIGUSR1 ask for a stop after the current step (main thread only)."""
+    try:
+        for sig in (signal.SIGTERM, signal.SIGUSR1):
+            signal.signal(sig, _on_signal)
+    except ValueError:        # not the main thread (e.g. under a test runner's worker)
+        pass
 
 
 class Model(Protocol):
@@ -81,7 +116,8 @@ class TimeLoop:
             log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)
         self.series = TimeSeriesCSV(self.out / "series.csv", {"step": "-", "t": "s", "dt": "s", **model.series_units},
                                     comm.rank, append=bool(restart), resume_at=self.t if restart else None)
-        self.fields = None
+        install_stop_handlers()
+        self.fields, self._fields_t = None, None
         if case.output.xdmf:
             name = "fields.xdmf" if not restart else f"fields_from_step{self.step}.xdmf"
             self.fields = FieldWriter(self.out / name, model.mesh, model.output_functions)
@@ -96,6 +132,9 @@ class TimeLoop:
     def write_fields(self) -> None:
         """The fluid fields (XDMF) and whatever else the model writes at an output time
         (coupled runs: the blocks, ``write_output``)."""
+        if self.t == self._fields_t:        # already written at this time (an output step that then stopped)
+            return
+        self._fields_t = self.t
         self.fields.write(self.t)
         extra = getattr(self.model, "write_output", None)
         if extra is not None:
@@ -104,6 +143,37 @@ class TimeLoop:
     def record(self, dt: float, diag: dict[str, float]) -> None:
         with self.timer("output"):
             self.series.write(step=self.step, t=self.t, dt=dt, **diag)
+
+    def stop_requested(self) -> str | None:
+        """Why the run should stop now (a STOP file in the output folder, a signal to any rank),
+        the same answer on every rank; None to go on."""
+        local = 0
+        if _signalled:
+            local = 2
+        elif self.comm.rank == 0 and (self.out / STOP_FILE).exists():
+            local = 1
+        why = self.comm.allreduce(local, op=MPI.MAX)
+        if why == 0:
+            return None
+        if why == 1:
+            return f"the file {self.out / STOP_FILE} (removed)"
+        return "a signal (SIGTERM/SIGUSR1)"
+
+    def _stop_on_request(self, why: str, dt: float) -> None:
+        """Checkpoint at this step, write the fields, remove the STOP file and raise StopRequested."""
+        self.checkpoint(dt)
+        if self.fields:
+            with self.timer("output"):
+                self.write_fields()
+        self.series.close()
+        _signalled.clear()
+        if self.comm.rank == 0:
+            (self.out / STOP_FILE).unlink(missing_ok=True)
+        self._log_cost_at_stop()
+        where = (f"checkpoint {self.out / 'checkpoint.h5'} at this step; continue with --restart "
+                 f"{self.out / 'checkpoint.h5'}" if self.case.output.checkpoint else
+                 "no checkpoint (output.checkpoint is off)")
+        raise StopRequested(f"stopped on request ({why}) after step {self.step}, t = {self.t:.6g} s: {where}")
 
     def _log_cost_at_stop(self) -> None:
         """The timing table and this rank's peak memory up to a divergence (not collective: the
@@ -148,6 +218,10 @@ class TimeLoop:
             if done or self.step % run.log_every == 0:
                 wall = time.perf_counter() - wall0
                 log.info(progress_line(self.step, self.t, dt, run.t_end, wall, t0, diag))
+            if not done:
+                why = self.stop_requested()
+                if why:
+                    self._stop_on_request(why, dt)
         if self.fields:
             self.fields.close()
         self.series.close()

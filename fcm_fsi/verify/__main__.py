@@ -74,7 +74,13 @@ def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNIN
         case_dir.mkdir(parents=True, exist_ok=True)
     comm.barrier()
     t0 = time.perf_counter()
-    metrics = cases[name].run(level, case_dir, comm)
+    from ..simulation.loop import StopRequested
+    try:
+        metrics = cases[name].run(level, case_dir, comm)
+    except StopRequested as err:
+        if comm.rank == 0:
+            print(f"{name}: {err}; `--resume` continues it", flush=True)
+        return False
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     result = {"case": name, "level": level, "ranks": comm.size, "wall_seconds": round(wall, 3),
               "metrics": {m.key: m.as_json() for m in metrics}}

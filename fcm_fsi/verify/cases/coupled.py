@@ -25,7 +25,7 @@ from ...config.case import apply_resolution
 from ...io.checkpoint import accepted_fingerprints, checkpoint_attributes
 from ...simulation.coupled import CoupledModel
 from ...io.logging import get_logger
-from ...simulation.loop import SimulationDiverged, TimeLoop
+from ...simulation.loop import SimulationDiverged, StopRequested, TimeLoop
 from ..registry import Metric, at_least, at_most, register, rel_error_metric, report_only, resume_checkpoint
 from ..registry import ranks_per_run as registry_ranks_per_run
 from .phase_field import read_series
@@ -76,6 +76,9 @@ def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.nda
     except SimulationDiverged as err:
         failure = str(err)
         log.error("%s diverged: %s", data["name"], failure)
+    except StopRequested as err:     # the other runs of the set go on; --resume continues this one
+        failure = str(err)
+        log.warning("%s: %s", data["name"], failure)
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     return read_series(sub / "series.csv"), wall, failure
 
