@@ -346,3 +346,24 @@ def test_sigterm_ends_the_run_after_its_step_with_a_checkpoint(tmp_path):
         step = int(f.attrs["step"])
     series = np.genfromtxt(out / "series.csv", delimiter=",", skip_header=1)
     assert step >= 3 and series.shape[0] == step + 1
+
+
+def test_shared_stop_file_stops_each_run_of_a_set_and_stays(tmp_path):
+    """The verification runner's case-folder STOP (``shared_stop``) stops a run after its
+    first step with a checkpoint, and is left in place so the set's next run stops too."""
+    from mpi4py import MPI
+
+    from fcm_fsi.config import case_from_dict
+    from fcm_fsi.simulation.loop import StopRequested, TimeLoop
+    from fcm_fsi.simulation.phase_field import PhaseFieldModel
+    shared = tmp_path / "STOP"
+    shared.touch()
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        case = case_from_dict(dict(CASE, name=name, run=dict(CASE["run"], t_end=0.1)))
+        loop = TimeLoop(case, PhaseFieldModel(case, MPI.COMM_WORLD), tmp_path / name, MPI.COMM_WORLD,
+                        restart=None, shared_stop=shared)
+        with pytest.raises(StopRequested, match="STOP"):
+            loop.run()
+        assert loop.step == 1 and (tmp_path / name / "checkpoint.h5").exists()
+    assert shared.exists()

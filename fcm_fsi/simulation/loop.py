@@ -57,13 +57,21 @@ def _on_signal(signum, frame) -> None:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def install_stop_handlers() -> None:
-    """SIGTERM and SIGUSR1 ask for a stop after the current step (main thread only)."""
+def install_stop_handlers() -> dict:
+    """SIGTERM and SIGUSR1 ask for a stop after the current step (main thread only); returns
+    the handlers they replace (:func:`restore_handlers`)."""
+    previous = {}
     try:
         for sig in (signal.SIGTERM, signal.SIGUSR1):
-            signal.signal(sig, _on_signal)
+            previous[sig] = signal.signal(sig, _on_signal)
     except ValueError:        # not the main thread (e.g. under a test runner's worker)
         pass
+    return previous
+
+
+def restore_handlers(previous: dict) -> None:
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
 
 
 class Model(Protocol):
@@ -104,8 +112,12 @@ def progress_line(step: int, t: float, dt: float, t_end: float, wall: float, t_s
 class TimeLoop:
     """Runs ``model`` for ``case`` writing into ``out_dir``."""
 
-    def __init__(self, case: Case, model: Model, out_dir: Path, comm: MPI.Comm, restart: str | None):
+    def __init__(self, case: Case, model: Model, out_dir: Path, comm: MPI.Comm, restart: str | None,
+                 shared_stop: Path | None = None):
+        """``shared_stop``: a further STOP file that stops this run and is left in place (the
+        verification runner's case folder: it stops every run of a set)."""
         self.case, self.model, self.out, self.comm = case, model, Path(out_dir), comm
+        self.shared_stop = shared_stop
         self.fingerprint = case_fingerprint(case)
         self.timer = StageTimer()
         self.step, self.t = 0, 0.0
@@ -116,7 +128,6 @@ class TimeLoop:
             log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)
         self.series = TimeSeriesCSV(self.out / "series.csv", {"step": "-", "t": "s", "dt": "s", **model.series_units},
                                     comm.rank, append=bool(restart), resume_at=self.t if restart else None)
-        install_stop_handlers()
         self.fields, self._fields_t = None, None
         if case.output.xdmf:
             name = "fields.xdmf" if not restart else f"fields_from_step{self.step}.xdmf"
@@ -152,11 +163,15 @@ class TimeLoop:
             local = 2
         elif self.comm.rank == 0 and (self.out / STOP_FILE).exists():
             local = 1
+        elif self.comm.rank == 0 and self.shared_stop is not None and self.shared_stop.exists():
+            local = 3
         why = self.comm.allreduce(local, op=MPI.MAX)
         if why == 0:
             return None
         if why == 1:
             return f"the file {self.out / STOP_FILE} (removed)"
+        if why == 3:
+            return f"the file {self.shared_stop}"
         return "a signal (SIGTERM/SIGUSR1)"
 
     def _stop_on_request(self, why: str, dt: float) -> None:
@@ -182,6 +197,13 @@ class TimeLoop:
                  self.case.name, self.step, self.t, self.timer.table(), peak_memory_mib())
 
     def run(self) -> dict[str, float]:
+        previous = install_stop_handlers()
+        try:
+            return self._run()
+        finally:
+            restore_handlers(previous)
+
+    def _run(self) -> dict[str, float]:
         run, wall0 = self.case.run, time.perf_counter()
         t0 = self.t
         diag = self.model.diagnostics()

@@ -72,6 +72,7 @@ def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNIN
     case_dir = out / name
     if comm.rank == 0:
         case_dir.mkdir(parents=True, exist_ok=True)
+        (case_dir / "STOP").unlink(missing_ok=True)     # a stop asked of an earlier invocation
     comm.barrier()
     t0 = time.perf_counter()
     from ..simulation.loop import StopRequested

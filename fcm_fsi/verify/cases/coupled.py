@@ -25,7 +25,7 @@ from ...config.case import apply_resolution
 from ...io.checkpoint import accepted_fingerprints, checkpoint_attributes
 from ...simulation.coupled import CoupledModel
 from ...io.logging import get_logger
-from ...simulation.loop import SimulationDiverged, StopRequested, TimeLoop
+from ...simulation.loop import STOP_FILE, SimulationDiverged, StopRequested, TimeLoop
 from ..registry import Metric, at_least, at_most, register, rel_error_metric, report_only, resume_checkpoint
 from ..registry import ranks_per_run as registry_ranks_per_run
 from .phase_field import read_series
@@ -72,7 +72,7 @@ def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.nda
     model = CoupledModel(case, comm, out_dir=sub)
     failure = None
     try:
-        TimeLoop(case, model, sub, comm, restart=restart).run()
+        TimeLoop(case, model, sub, comm, restart=restart, shared_stop=out / STOP_FILE).run()
     except SimulationDiverged as err:
         failure = str(err)
         log.error("%s diverged: %s", data["name"], failure)

@@ -14,7 +14,7 @@ import numpy as np
 from mpi4py import MPI
 
 from ...config import case_from_dict
-from ...simulation.loop import TimeLoop
+from ...simulation.loop import STOP_FILE, TimeLoop
 from ...simulation.two_phase import TwoPhaseModel
 from ..registry import Metric, at_least, at_most, register, rel_error_metric, report_only, resume_checkpoint
 from .phase_field import read_series
@@ -80,7 +80,7 @@ def run_two_phase(data: dict, out: Path, comm: MPI.Comm) -> tuple[TwoPhaseModel,
     case, sub = case_output(data, out, comm)
     t0 = time.perf_counter()
     model = TwoPhaseModel(case, comm)
-    TimeLoop(case, model, sub, comm, restart=resume_checkpoint(sub)).run()
+    TimeLoop(case, model, sub, comm, restart=resume_checkpoint(sub), shared_stop=out / STOP_FILE).run()
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     comm.barrier()
     return model, read_series(sub / "series.csv"), wall
