@@ -15,8 +15,9 @@ class CouplingConfig:
     penalty: float = param(1.0e4, doc="γ of the wall penalty p̄ = γ(μ/h + ρh/Δt). Large γ locks the cut cells' "
                                       "velocity to the wall and adds an entrained fluid layer ≈ 0.7 cells thick to "
                                       "every body's added mass (at R/h = 6.4: 1.66 ρV against 1.04; with wall_slip "
-                                      "and γ = 10: 1.08); 1e4 is kept because the coupled verification cases were "
-                                      "measured with it (docs/coupling.md)", gt=0, le=1e8)
+                                      "and γ = 10: 1.08), but γ = 10 with wall_slip diverged where a free surface meets a "
+                                      "block (floating_box, bonded_wall_surge) and the coupled verification cases "
+                                      "were measured with 1e4 (docs/coupling.md)", gt=0, le=1e8)
     fictitious_factor: float = param(1.0e-3, doc="α: the solid part of each cell carries the fluid equations "
                                                  "scaled by α (keeps tiny cut cells regular)", gt=0, lt=1)
     wall: Literal["penalty", "pressure", "nitsche"] = param(
