@@ -66,16 +66,16 @@ def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNIN
         rc = subprocess.call(cmd, env=env)
         return rc == 0
     from mpi4py import MPI
+    from ..simulation.loop import STOP_FILE, StopRequested
     comm = MPI.COMM_WORLD
     set_resume(resume)
     set_ranks_per_run(ranks_per_run)
     case_dir = out / name
     if comm.rank == 0:
         case_dir.mkdir(parents=True, exist_ok=True)
-        (case_dir / "STOP").unlink(missing_ok=True)     # a stop asked of an earlier invocation
+        (case_dir / STOP_FILE).unlink(missing_ok=True)   # a stop asked of an earlier invocation
     comm.barrier()
     t0 = time.perf_counter()
-    from ..simulation.loop import StopRequested
     try:
         metrics = cases[name].run(level, case_dir, comm)
     except StopRequested as err:
