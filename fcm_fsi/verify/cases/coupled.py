@@ -76,7 +76,7 @@ def run_coupled(data: dict, out: Path, comm: MPI.Comm) -> tuple[dict[str, np.nda
     except SimulationDiverged as err:
         failure = str(err)
         log.error("%s diverged: %s", data["name"], failure)
-    except StopRequested as err:     # the other runs of the set go on; --resume continues this one
+    except StopRequested as err:     # recorded as not completed; --resume continues it from its checkpoint
         failure = str(err)
         log.warning("%s: %s", data["name"], failure)
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
