@@ -215,3 +215,20 @@ def test_bonded_blocks_are_bonded_on_their_shared_faces_only_and_start_stress_fr
 def test_bonded_block_config_errors(blocks, cohesive, words):
     with pytest.raises(ConfigError, match=words):
         dem_config(blocks, cohesive)
+
+
+@pytest.mark.parametrize("name", ["tsunami_building", "building_paper"])
+def test_shipped_buildings_start_standing_on_the_ground(name):
+    """The structure's spheres are inset by one radius (their envelope is the box), so a
+    building whose ``origin`` is on the ground plane starts touching it. The tsunami case had
+    its origin one radius up (z = 0.1 m): the 72 t building fell 0.1 m at t = 0, hit the ground
+    at 1.4 m/s and bounced until ≈ 0.6 s, just before the water arrived (session 19)."""
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.dem.model import build_state, build_structure
+    dem = load_case(ROOT / "cases" / f"{name}.yaml").dem
+    st = build_state(dem, build_structure(dem))
+    st.update_spheres()
+    ground = [w for w in dem.walls if w.kind == "plane" and tuple(w.normal) == (0.0, 0.0, 1.0)]
+    z_ground = ground[0].point[2] if ground else 0.0
+    lowest = float((st.sph_pos[:, 2] - st.sph_radius).min())
+    assert lowest == pytest.approx(z_ground, abs=1e-9)
