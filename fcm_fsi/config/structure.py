@@ -63,6 +63,7 @@ class StructureConfig:
     sphere_radius: float = param(unit="m", doc="radius of the surface spheres (every block edge must be >= 2 radii)", gt=0)
     material: str = param(doc="material name in dem.materials (contact parameters of the spheres)")
     density: float | None = param(None, unit="kg/m³", doc="density of the solid blocks (mass and inertia come from the box); null = the material's density", gt=0)
+    foundation: float = param(0.0, unit="m", doc="thickness of a fixed foundation slab under the footprint, its top at the origin's z; every block standing on it is bonded to it by dem.cohesive, so the building is anchored and its ground-floor joints carry the base shear (without it the building stands loose on the ground and slides as a whole once the lateral load passes friction × weight). The foundation never moves, comes after the building's blocks, and the fluid does not see it (it lies below the ground); 0 = none. At least 2 sphere radii", ge=0)
 
     def __post_init__(self) -> None:
         if not self.bays_x or not self.bays_y:
@@ -76,6 +77,9 @@ class StructureConfig:
                               f"storey_height = {self.storey_height}")
         if min(self.bays_x + self.bays_y) <= max(cx, cy):
             raise ConfigError("key 'structure.bays_x'/'bays_y': every bay must be longer than the column")
+        if 0.0 < self.foundation < 2 * self.sphere_radius:
+            raise ConfigError(f"key 'structure.foundation' = {self.foundation} m: allowed 0 (none) or at least "
+                              f"two sphere radii, {2 * self.sphere_radius:g} m")
         if len(set(self.walls)) != len(self.walls):
             raise ConfigError(f"key 'structure.walls' = {list(self.walls)} repeats a side")
         for i, op in enumerate(self.openings):

@@ -25,7 +25,7 @@ from ..config.structure import StructureConfig
 from .bodies import box_template
 from .cohesive import BondFace, CohesiveBonds, CohesiveLaw
 
-KINDS = ("column", "wall", "slab", "block")
+KINDS = ("column", "wall", "slab", "block", "foundation")
 
 
 @dataclass
@@ -47,6 +47,11 @@ class Structure:
     @property
     def nb(self) -> int:
         return self.lo.shape[0]
+
+    @property
+    def fixed(self) -> np.ndarray:
+        """(nb,) bool: the blocks that never move (the foundation)."""
+        return self.kind == KINDS.index("foundation")
 
     @property
     def pos(self) -> np.ndarray:
@@ -115,8 +120,10 @@ def touching_faces(lo: np.ndarray, hi: np.ndarray, tol: float = 1e-6) -> list[Bo
 
 
 def assemble(lo, hi, *, density: float, sphere_radius: float, material: int = 0,
-             kind=None, storey=None) -> Structure:
-    """Blocks from boxes ``lo``/``hi`` (nb, 3): mass properties, surface spheres, faces."""
+             kind=None, storey=None, spacing=None) -> Structure:
+    """Blocks from boxes ``lo``/``hi`` (nb, 3): mass properties, surface spheres, faces.
+    ``spacing`` (nb,) [m]: the largest surface-sphere centre spacing of each block (NaN or
+    None: the default 2·``sphere_radius``)."""
     lo = np.asarray(lo, float).reshape(-1, 3)
     hi = np.asarray(hi, float).reshape(-1, 3)
     ext = hi - lo
@@ -127,7 +134,9 @@ def assemble(lo, hi, *, density: float, sphere_radius: float, material: int = 0,
                           f"{ext[b].min():g} m, thinner than two sphere radii "
                           f"(2·{sphere_radius:g} m); use larger members or smaller spheres")
     ext = np.where(np.abs(ext - 2 * sphere_radius) < 1e-9, 2 * sphere_radius, ext)  # round-off
-    tmpl = [box_template(ext[b], density, sphere_radius) for b in range(lo.shape[0])]
+    gap = np.full(lo.shape[0], np.nan) if spacing is None else np.asarray(spacing, float)
+    tmpl = [box_template(ext[b], density, sphere_radius, None if np.isnan(gap[b]) else float(gap[b]))
+            for b in range(lo.shape[0])]
     nb = lo.shape[0]
     ns = [len(t.sph_radius) for t in tmpl]
     return Structure(
@@ -207,6 +216,9 @@ def building_boxes(cfg: StructureConfig):
         add(*_grid_boxes(_cuts(gx[0] - cxs / 2, gx[-1] + cxs / 2, (), bs),
                          _cuts(gy[0] - cys / 2, gy[-1] + cys / 2, (), bs),
                          np.array([zs, zs + cfg.slab_thickness])), "slab", s)
+    if cfg.foundation > 0.0:     # last, so the building's block numbers do not depend on it
+        add(np.array([[gx[0] - cxs / 2, gy[0] - cys / 2, oz - cfg.foundation]]),
+            np.array([[gx[-1] + cxs / 2, gy[-1] + cys / 2, oz]]), "foundation", -1)
     return (np.concatenate(los), np.concatenate(his), np.concatenate(kinds),
             np.concatenate(storeys))
 
@@ -221,8 +233,11 @@ def build_building(cfg: StructureConfig, material_index: int = 0,
     if density is None:
         raise ConfigError("key 'dem.structure.density' is null and no material density was given")
     lo, hi, kind, storey = building_boxes(cfg)
+    # the fixed foundation needs spheres only where debris may land on it, and the ground plane
+    # is there too: one per block_size instead of the members' 2 r keeps it from adding ~1,000
+    spacing = np.where(kind == KINDS.index("foundation"), max(cfg.block_size, 2 * cfg.sphere_radius), np.nan)
     return assemble(lo, hi, density=density, sphere_radius=cfg.sphere_radius,
-                    material=material_index, kind=kind, storey=storey)
+                    material=material_index, kind=kind, storey=storey, spacing=spacing)
 
 
 # The paper's building (§4(4)): 208 blocks, sphere radius 0.1 m, σ_c = 1.0e7 Pa, δ_f = 0.02 m.

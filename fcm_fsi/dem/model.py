@@ -113,7 +113,7 @@ def build_state(cfg: DEMConfig, structure=None) -> DEMState:
         inertia.extend(structure.inertia)
         vel.extend(np.zeros((structure.nb, 3)))
         omega.extend(np.zeros((structure.nb, 3)))
-        fixed.extend([False] * structure.nb)
+        fixed.extend(structure.fixed)
         sb.extend(structure.sph_block + first)
         sl.extend(structure.sph_local)
         sr.extend(structure.sph_radius)
