@@ -217,7 +217,9 @@ def test_checkpoints_of_code_before_an_option_existed_are_accepted_only_at_its_o
     expected = []
     for k in range(len(keys), 1, -1):
         expected += [case_fingerprint(cluster, False, tuple(keys[k:])), case_fingerprint(cluster, True, tuple(keys[k:]))]
-    assert accepted_fingerprints(cluster) == tuple(expected)
+    # (an option the case has no section for, such as dem.structure.foundation here, leaves the
+    # hash as it is: the same fingerprint once)
+    assert accepted_fingerprints(cluster) == tuple(dict.fromkeys(expected))
 
 
 def test_a_checkpoint_from_before_blocks_could_be_bonded_is_accepted_while_none_is(root):
@@ -235,6 +237,22 @@ def test_a_checkpoint_from_before_blocks_could_be_bonded_is_accepted_while_none_
     assert any(b.bonded for b in bonded.dem.blocks)
     assert case_fingerprint(bonded, without=before) not in accepted_fingerprints(bonded)
 
+
+
+def test_a_checkpoint_from_before_foundations_is_accepted_only_for_a_loose_building(root):
+    """``dem.structure.foundation`` (session 19): a tsunami checkpoint hashed without it is
+    accepted while the building has none, and refused once it stands on one."""
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.io.checkpoint import ADDED_OPTIONS, accepted_fingerprints, case_fingerprint
+    keys = [(sec, key) for sec, key, _ in ADDED_OPTIONS]
+    before = tuple(keys[keys.index(("dem.structure", "foundation")):])
+    path = root / "cases" / "tsunami_building.yaml"
+    founded = load_case(path)
+    assert founded.dem.structure.foundation > 0
+    assert case_fingerprint(founded, without=before) not in accepted_fingerprints(founded)
+    loose = load_case(path, ["dem.structure.foundation=0"])
+    old = case_fingerprint(loose, without=before)
+    assert old != case_fingerprint(loose) and old in accepted_fingerprints(loose)
 
 def test_verify_resume_reads_a_finished_run_instead_of_running_it_again(root, tmp_path):
     """``verify --resume``: a run whose checkpoint is this case's and at its t_end is read, on

@@ -32,6 +32,7 @@ ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("coupling", "wall_motion", "block"),       # session 15
     ("dem.blocks[]", "bonded", False),          # session 16
     ("coupling", "added_mass_model", "volume"),  # session 17
+    ("dem.structure", "foundation", 0.0),       # session 19
 )
 
 
