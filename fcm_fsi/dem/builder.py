@@ -134,8 +134,8 @@ def assemble(lo, hi, *, density: float, sphere_radius: float, material: int = 0,
                           f"{ext[b].min():g} m, thinner than two sphere radii "
                           f"(2·{sphere_radius:g} m); use larger members or smaller spheres")
     ext = np.where(np.abs(ext - 2 * sphere_radius) < 1e-9, 2 * sphere_radius, ext)  # round-off
-    gap = np.full(lo.shape[0], np.nan) if spacing is None else np.asarray(spacing, float)
-    tmpl = [box_template(ext[b], density, sphere_radius, None if np.isnan(gap[b]) else float(gap[b]))
+    spacings = np.full(lo.shape[0], np.nan) if spacing is None else np.asarray(spacing, float)
+    tmpl = [box_template(ext[b], density, sphere_radius, None if np.isnan(spacings[b]) else float(spacings[b]))
             for b in range(lo.shape[0])]
     nb = lo.shape[0]
     ns = [len(t.sph_radius) for t in tmpl]
