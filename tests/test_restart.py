@@ -238,7 +238,6 @@ def test_a_checkpoint_from_before_blocks_could_be_bonded_is_accepted_while_none_
     assert case_fingerprint(bonded, without=before) not in accepted_fingerprints(bonded)
 
 
-
 def test_a_checkpoint_from_before_foundations_is_accepted_only_for_a_loose_building(root):
     """``dem.structure.foundation`` (session 19): a tsunami checkpoint hashed without it is
     accepted while the building has none, and refused once it stands on one."""
@@ -253,6 +252,7 @@ def test_a_checkpoint_from_before_foundations_is_accepted_only_for_a_loose_build
     loose = load_case(path, ["dem.structure.foundation=0"])
     old = case_fingerprint(loose, without=before)
     assert old != case_fingerprint(loose) and old in accepted_fingerprints(loose)
+
 
 def test_verify_resume_reads_a_finished_run_instead_of_running_it_again(root, tmp_path):
     """``verify --resume``: a run whose checkpoint is this case's and at its t_end is read, on
