@@ -132,6 +132,22 @@ def test_resolution_levels_merge_and_name_the_allowed_levels():
     assert paper.dem.dt == 1.0e-5 and paper.mesh.refine[0].size == 0.01
 
 
+def test_command_line_overrides_win_over_the_resolution_level():
+    """Precedence case file < resolution level < --set: the coarse tsunami level sets dem.dt
+    and fluid.petsc, and a --set of either must not be silently replaced by the level's value
+    (it was until session 20); --set can still pick and edit the level itself."""
+    path = ROOT / "cases" / "tsunami_building.yaml"
+    coarse = load_case(path)
+    assert coarse.dem.dt == 5.0e-5 and coarse.fluid.petsc["ksp_type"] == "preonly"
+    case = load_case(path, ["dem.dt=2.0e-5", "fluid.petsc={ksp_type: gmres, pc_type: lu}"])
+    assert case.dem.dt == 2.0e-5
+    assert case.fluid.petsc == {"ksp_type": "gmres", "pc_type": "lu"}
+    edited = load_case(path, ["resolutions.coarse.dem.dt=4.0e-5"])
+    assert edited.dem.dt == 4.0e-5
+    paper = load_case(path, ["resolution=paper", "dem.dt=2.0e-5"])
+    assert paper.dem.dt == 2.0e-5 and paper.mesh.refine[0].size == 0.01
+
+
 def test_cli_phase_field_without_liquid_names_file_and_key(tmp_path):
     """A liquid region outside the mesh is bad input (it used to end in a ZeroDivisionError in
     the diagnostics): exit 2, one line naming the case file and phase_field.initial."""

@@ -295,3 +295,32 @@ def test_gmres_breakdown_is_accepted_only_when_the_true_residual_meets_rtol():
     assert _true_residual_met(ksp)
     x.array[0] += 1e-3            # ‖A δx‖ ≈ 4e-3 ≫ 1e-8 ‖b‖
     assert not _true_residual_met(ksp)
+
+
+def test_lu_kept_over_time_steps_as_gmres_preconditioner_gives_the_same_flow():
+    """``fluid.preconditioner_steps``: an LU factorisation kept for several steps as the GMRES
+    preconditioner reaches the same solution as factorising every step (to the Krylov and
+    Newton tolerances), with one factorisation while the solves stay cheap."""
+    from fcm_fsi.mesh.channel import box
+    tm = box(MPI.COMM_WORLD, n=(6, 6, 6))
+
+    def run(steps: int):
+        cfg = FluidConfig(density=1.0, viscosity=0.01, rtol=1e-9, atol=1e-12, preconditioner_steps=steps, startup_steps=0,
+                          petsc={"ksp_type": "gmres", "pc_type": "lu", "ksp_rtol": 1e-10}, boundaries=(
+                              BoundaryCondition(boundary="left", kind="parabolic_inflow", max_speed=1.0),
+                              BoundaryCondition(boundary="right", kind="do_nothing"),
+                              *(BoundaryCondition(boundary=b, kind="no_slip") for b in ("bottom", "top", "front", "back"))))
+        ns = NavierStokes(tm.mesh, cfg, 0.05, facet_tags=tm.facet_tags, boundary_names=tm.names)
+        built, its = [], 0
+        for _ in range(6):
+            its += ns.step().krylov_iterations
+            built.append(ns._preconditioner_built)
+        return ns, built, its
+
+    fresh, built_fresh, its_fresh = run(1)
+    kept, built_kept, its_kept = run(10)
+    assert built_fresh == list(range(1, 7))        # one factorisation per step
+    assert set(built_kept) == {1}                  # the first step's, kept
+    assert its_kept > its_fresh                    # paid for with Krylov iterations
+    diff = np.abs(kept.U.x.array - fresh.U.x.array).max()
+    assert diff < 1e-6 * np.abs(fresh.U.x.array).max()

@@ -249,9 +249,25 @@ def test_a_checkpoint_from_before_foundations_is_accepted_only_for_a_loose_build
     founded = load_case(path)
     assert founded.dem.structure.foundation > 0
     assert case_fingerprint(founded, without=before) not in accepted_fingerprints(founded)
-    loose = load_case(path, ["dem.structure.foundation=0"])
+    loose = load_case(path, ["dem.structure.foundation=0", "fluid.mass_consistent_convection=false"])
     old = case_fingerprint(loose, without=before)
     assert old != case_fingerprint(loose) and old in accepted_fingerprints(loose)
+
+
+def test_a_checkpoint_from_before_the_mass_defect_term_is_refused_once_the_term_is_on(root):
+    """``fluid.mass_consistent_convection`` (session 20) changes the momentum equation: a
+    checkpoint hashed without it is accepted only while the case keeps it off."""
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.io.checkpoint import ADDED_OPTIONS, accepted_fingerprints, case_fingerprint
+    keys = [(sec, key) for sec, key, _ in ADDED_OPTIONS]
+    before = tuple(keys[keys.index(("fluid", "mass_consistent_convection")):])
+    path = root / "cases" / "tsunami_building.yaml"
+    on = load_case(path)
+    assert on.fluid.mass_consistent_convection
+    assert case_fingerprint(on, without=before) not in accepted_fingerprints(on)
+    off = load_case(path, ["fluid.mass_consistent_convection=false"])
+    old = case_fingerprint(off, without=before)
+    assert old != case_fingerprint(off) and old in accepted_fingerprints(off)
 
 
 def test_verify_resume_reads_a_finished_run_instead_of_running_it_again(root, tmp_path):

@@ -72,12 +72,21 @@ merged case is validated as usual."""
 
 
 def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
-    """Load and validate a case file, applying ``key.path=value`` overrides, then its
-    resolution level (``resolution`` / ``resolutions``, see :data:`RESOLUTION_DOC`)."""
+    """Load and validate a case file with its resolution level (``resolution`` /
+    ``resolutions``, see :data:`RESOLUTION_DOC`) and ``key.path=value`` overrides.
+
+    Precedence: case file < resolution level < overrides. The overrides are applied before
+    the merge (so that ``resolution=paper`` or ``resolutions.coarse.…`` choose and edit the
+    level) and again after it, so that an option the level also sets (e.g. ``dem.dt``) takes
+    the command line's value instead of being silently replaced by the level's."""
     data = read_yaml(Path(path))
     for assignment in overrides:
         apply_override(data, assignment)
-    return build(Case, apply_resolution(data, str(path)), source=str(path))
+    merged = apply_resolution(data, str(path))
+    for assignment in overrides:
+        if assignment.split("=", 1)[0].strip().split(".")[0] not in ("resolution", "resolutions"):
+            apply_override(merged, assignment)
+    return build(Case, merged, source=str(path))
 
 
 def case_from_dict(data: dict, source: str = "<dict>") -> Case:

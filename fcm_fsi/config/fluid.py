@@ -94,6 +94,15 @@ class FluidConfig:
                   "(docs/performance.md); the Krylov tolerance is unchanged, so the step converges to the same "
                   "tolerance. null = automatic: on for Krylov solvers, off for a direct solve (ksp_type preonly), "
                   "where it would turn Newton into a chord iteration")
+    preconditioner_steps: int = param(
+        1, doc="with reuse_preconditioner: keep the preconditioner for up to this many time steps, not just "
+               "within one (e.g. an LU factorisation as GMRES preconditioner: factorise once, then a few "
+               "Krylov iterations per solve while the Jacobian drifts). It is rebuilt earlier when a solve "
+               "needed more than preconditioner_max_iterations, and a solve that fails with the old one is "
+               "repeated with a fresh one; the Krylov tolerance is unchanged. 1 = rebuild every step", ge=1, le=1000)
+    preconditioner_max_iterations: int = param(
+        30, doc="Krylov iterations above which a kept preconditioner (preconditioner_steps > 1) is rebuilt "
+                "at the next solve", ge=1, le=10000)
     max_iterations: int = param(25, doc="nonlinear iterations per step before the run stops with an error", ge=1)
     quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
     well_balanced: bool | None = param(
@@ -102,6 +111,13 @@ class FluidConfig:
                   "costs one P2 Poisson solve per step. null = automatic: on without blocks, off in coupled "
                   "runs (not yet validated with the cut domain, docs/two-phase.md); false = the plain P1 "
                   "pressure (spurious currents at the density jump)")
+    mass_consistent_convection: bool = param(
+        False, doc="two-phase runs: add ½(∂ρ/∂t + ∇·(ρu))·u·w to the momentum equation (the "
+                   "variable-density form of Temam's term, Guermond & Quartapelle 2000). ρ(φ) of the "
+                   "phase field does not obey the mass equation exactly (interface sharpening, clipping, "
+                   "volume correction); without the term that mismatch feeds kinetic energy ½|u|²·(mass "
+                   "defect) into the flow, most strongly in the air next to thin water films. Zero where "
+                   "ρ follows the mass equation, so consistent")
     pressure_reference: tuple[float, ...] | None = param(
         None, unit="m", doc="point where p = 0 is pinned when no boundary is do_nothing (default: mesh lower corner)")
     petsc: dict[str, str | int | float | bool] = param(

@@ -307,6 +307,8 @@ class NavierStokes:
         self.ksp = solvers.make_ksp(self.comm, self.A, petsc_prefix, opts, fields=self.field_index_sets())
         self.history: list[StepInfo] = []
         self.backtracks = 0   # line-search halvings over the run (``_backtrack``)
+        self._preconditioner_built: int | None = None   # step whose first solve built the preconditioner
+        self._last_krylov = 0                           # Krylov iterations of the last solve
 
     def field_index_sets(self) -> dict[str, PETSc.IS]:
         """Owned global rows of velocity ("u") and pressure ("p") in the monolithic system, for
@@ -494,8 +496,17 @@ class NavierStokes:
             t0 = time.perf_counter()
             self._assemble_jacobian()
             t1 = time.perf_counter()
-            self.ksp.getPC().setReusePreconditioner(bool(self.reuse_preconditioner and it > 0))
+            reuse = bool(self.reuse_preconditioner and (it > 0 or self._preconditioner_still_good()))
+            self.ksp.getPC().setReusePreconditioner(reuse)
             self.ksp.solve(self.b, self.dU.vector)
+            if reuse and self.ksp.getConvergedReason() < 0:   # the kept preconditioner has gone stale
+                info.krylov_iterations += self.ksp.getIterationNumber()
+                self.ksp.getPC().setReusePreconditioner(False)
+                self.ksp.solve(self.b, self.dU.vector)
+                reuse = False
+            if not reuse:
+                self._preconditioner_built = self.step_count
+            self._last_krylov = self.ksp.getIterationNumber()
             info.assembly_seconds += t1 - t0
             info.solve_seconds += time.perf_counter() - t1
             solvers.check_converged(self.ksp, self.step_count, self.t)
@@ -505,6 +516,16 @@ class NavierStokes:
         raise NonlinearSolveError(self.step_count, self.t, info.residuals,
                                   f"no convergence in {cfg.max_iterations} {cfg.nonlinear} iterations "
                                   f"(rtol {cfg.rtol:g}, atol {cfg.atol:g})")
+
+    def _preconditioner_still_good(self) -> bool:
+        """At a step's first solve: keep the preconditioner of an earlier step when
+        ``preconditioner_steps`` > 1, it is younger than that and the last solve needed at most
+        ``preconditioner_max_iterations`` Krylov iterations."""
+        cfg = self.config
+        built = self._preconditioner_built
+        return (cfg.preconditioner_steps > 1 and built is not None
+                and self.step_count - built < cfg.preconditioner_steps
+                and self._last_krylov <= cfg.preconditioner_max_iterations)
 
     def _backtrack(self, r: float, r_prev: float, tau_before=None) -> float:
         """Backtracking line search on the residual norm: when the full update U ← U − dU did

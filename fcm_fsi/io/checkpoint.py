@@ -33,6 +33,7 @@ ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("dem.blocks[]", "bonded", False),          # session 16
     ("coupling", "added_mass_model", "volume"),  # session 17
     ("dem.structure", "foundation", 0.0),       # session 19
+    ("fluid", "mass_consistent_convection", False),  # session 20
 )
 
 
@@ -50,6 +51,7 @@ def _option_holders(data: dict, section: str) -> list[dict]:
 def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str], ...] = ()) -> str:
     """Hash of the resolved case, ignoring what a restart may change: end time, cadence, output,
     and how the linear systems are solved (``fluid.petsc``, ``fluid.reuse_preconditioner``,
+    ``fluid.preconditioner_steps``, ``fluid.preconditioner_max_iterations``,
     ``phase_field.petsc`` — e.g. a direct solver after an iterative one broke down; they change
     the solution only at solver tolerance). ``legacy``: the hash of checkpoints written before
     session 14, which still covered the solver options (such checkpoints are still accepted).
@@ -61,6 +63,8 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
         for section, keys in (("fluid", ("petsc", "reuse_preconditioner")), ("phase_field", ("petsc",))):
             for key in keys:
                 (data.get(section) or {}).pop(key, None)
+    for key in ("preconditioner_steps", "preconditioner_max_iterations"):   # solver options (session 20)
+        (data.get("fluid") or {}).pop(key, None)
     for section, key in without:
         for holder in _option_holders(data, section):
             holder.pop(key, None)
