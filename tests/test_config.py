@@ -59,6 +59,15 @@ def test_cross_field_checks():
         case_from_dict(with_change("run.dt", 2.0))
     with pytest.raises(ConfigError, match="must exceed mesh.lower"):
         case_from_dict(with_change("mesh.upper", [1, -1]))
+    with pytest.raises(ConfigError, match="'run.cfl_gas' needs run.cfl"):
+        case_from_dict(with_change("run.cfl_gas", 1.0))
+    data = with_change("run.cfl", 0.5)
+    data["run"]["cfl_gas"] = 0.2
+    with pytest.raises(ConfigError, match="'run.cfl_gas' = 0.2 must be at least run.cfl = 0.5"):
+        case_from_dict(data)
+    data["run"]["cfl_gas"] = 1.0     # GOOD has no fluid: the gas bound means nothing there
+    with pytest.raises(ConfigError, match="'run.cfl_gas' applies to two-phase flow"):
+        case_from_dict(data)
 
 
 def test_missing_file_is_one_line(tmp_path):

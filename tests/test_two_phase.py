@@ -10,7 +10,7 @@ from mpi4py import MPI
 
 from fcm_fsi.config import case_from_dict, load_case
 from fcm_fsi.io.timing import StageTimer
-from fcm_fsi.simulation.two_phase import TwoPhaseModel, property_map
+from fcm_fsi.simulation.two_phase import GAS_PHI, TwoPhaseModel, property_map
 from fcm_fsi.verify.cases.two_phase import period_from_gauge, sloshing_case, still_water_case
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,6 +38,39 @@ def still_water(cells: int, dt: float, steps: int, well_balanced: bool | None = 
         data["phase_field"]["reference_velocity"] = mobility
     model = TwoPhaseModel(case_from_dict(data), MPI.COMM_WORLD)
     return data, advance(model, steps, dt)
+
+
+def test_gas_courant_number_loosens_the_step_only_in_the_gas():
+    """run.cfl_gas: Δt = min(C·h/max_liquid|u|, C_gas·h/max_gas|u|), φ read at the velocity
+    nodes (checked against the dof coordinates). With 1 m/s in the liquid and 10 m/s in the gas
+    the gas limits (1.2·h/10); with 2 m/s in the gas the liquid does (0.4·h/1); without
+    cfl_gas the gas's 10 m/s sets 0.4·h/10, the rule of every run before session 21."""
+    comm = MPI.COMM_WORLD
+    data = still_water_case(cells=12, dt=1e-3, t_end=1e-2)
+    data["run"]["cfl"], data["run"]["cfl_gas"] = 0.4, 1.2
+    model = TwoPhaseModel(case_from_dict(data), comm)
+    phi_v = model.phi_at_velocity_nodes()
+    x_phi = model.pf.V.tabulate_dof_coordinates()[model._v_to_phi]
+    assert np.allclose(x_phi, model.ns.V.tabulate_dof_coordinates())
+    gas = phi_v < GAS_PHI
+    assert comm.allreduce(int(gas.sum()), op=MPI.SUM) > 0 and comm.allreduce(int((~gas).sum()), op=MPI.SUM) > 0
+
+    def set_speeds(liquid: float, gas_speed: float) -> None:
+        u = np.zeros((gas.size, model.gdim))
+        u[:, 0] = np.where(gas, gas_speed, liquid)
+        model.ns.U.x.array[model.ns.V_map] = u.ravel()
+
+    h = model.h_min
+    set_speeds(1.0, 10.0)
+    assert np.isclose(model.stable_dt(0.4), 1.2 * h / 10.0)
+    set_speeds(1.0, 2.0)
+    assert np.isclose(model.stable_dt(0.4), 0.4 * h / 1.0)
+    data["run"]["cfl_gas"] = None
+    plain = TwoPhaseModel(case_from_dict(data), comm)
+    u = np.zeros((gas.size, model.gdim))
+    u[:, 0] = np.where(plain.phi_at_velocity_nodes() < GAS_PHI, 10.0, 1.0)
+    plain.ns.U.x.array[plain.ns.V_map] = u.ravel()
+    assert np.isclose(plain.stable_dt(0.4), 0.4 * h / 10.0)
 
 
 def test_still_water_bottom_pressure_is_hydrostatic():

@@ -38,6 +38,8 @@ class Case:
         pf = self.phase_field
         if pf is not None and self.fluid is None and pf.velocity is None:
             raise ConfigError("key 'phase_field.velocity' is required when there is no fluid section")
+        if self.run.cfl_gas is not None and (pf is None or self.fluid is None):
+            raise ConfigError("key 'run.cfl_gas' applies to two-phase flow: it needs both phase_field and fluid")
         if self.fluid is not None and self.dem is not None:
             self._check_coupled()
 

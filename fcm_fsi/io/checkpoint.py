@@ -53,7 +53,9 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
     and how the linear systems are solved (``fluid.petsc``, ``fluid.reuse_preconditioner``,
     ``fluid.preconditioner_steps``, ``fluid.preconditioner_max_iterations``,
     ``phase_field.petsc`` — e.g. a direct solver after an iterative one broke down; they change
-    the solution only at solver tolerance). ``legacy``: the hash of checkpoints written before
+    the solution only at solver tolerance) and ``run.cfl_gas`` (a restart may loosen the step rule
+    in the gas when spurious gas jets throttle a run; it changes the solution at the level of the
+    time discretisation error, like the CFL-adapted steps themselves). ``legacy``: the hash of checkpoints written before
     session 14, which still covered the solver options (such checkpoints are still accepted).
     ``without``: (section, key) options left out, as in checkpoints written before they existed."""
     data = to_dict(case)
@@ -65,6 +67,7 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
                 (data.get(section) or {}).pop(key, None)
     for key in ("preconditioner_steps", "preconditioner_max_iterations"):   # solver options (session 20)
         (data.get("fluid") or {}).pop(key, None)
+    data["run"].pop("cfl_gas", None)   # the gas's Courant bound: a restart may loosen it (session 21)
     for section, key in without:
         for holder in _option_holders(data, section):
             holder.pop(key, None)

@@ -661,12 +661,16 @@ class CoupledModel:
         return self.fluid.last_dt
 
     def stable_dt(self, cfl: float) -> float:
-        """The fluid's CFL step, also limited so no block moves more than ¼ of the band,
+        """The fluid's CFL step (over the fluid nodes; with run.cfl_gas as in
+        :meth:`TwoPhaseModel.stable_dt`), also limited so no block moves more than ¼ of the band,
         rounded down to a whole number of DEM steps."""
         st = self.system.state
         vmax = float(np.linalg.norm(st.vel, axis=1).max(initial=0.0))
-        umax = self.fluid_speed_max()
-        dt = cfl * self.h_min / umax if umax > 0 else np.inf
+        if self.case.run.cfl_gas is not None:      # two-phase: a looser Courant number in the gas
+            dt = self.fluid.stable_dt(cfl, self.v_fluid)
+        else:
+            umax = self.fluid_speed_max()
+            dt = cfl * self.h_min / umax if umax > 0 else np.inf
         if vmax > 0:
             dt = min(dt, 0.25 * self.band / vmax)
         dem_dt = self.case.dem.dt

@@ -22,7 +22,9 @@ tank) that excites the tank's seiche; with Π a layered fluid at rest is exact (
 
 Time-step rule (with ``run.cfl``): Δt = min(dt_max, C·h_min/max|u|) — the Courant number C
 measured with the smallest cell h_min (the refined surface band), capped by ``run.dt_max``
-(default ``run.dt``), the stated maximum.
+(default ``run.dt``), the stated maximum. ``run.cfl_gas`` allows a larger Courant number at the
+gas nodes (φ < 0.05): the gas's spurious jets along walls hit by the liquid (docs/two-phase.md,
+"Gas Courant number") would otherwise set the step of the whole run.
 
 Diagnostics include the liquid level at the two vertical walls normal to x and the wetted
 length of the bottom (the plane normal to the last axis: ``bottom`` in 2D, ``front`` (z = z_min)
@@ -51,6 +53,7 @@ from .fluid import ns_load_state, ns_state
 from .loop import SimulationDiverged
 from .phase_field import phase_field_health
 
+GAS_PHI = 0.05   # velocity nodes with φ below this are gas for run.cfl_gas (the interface's outer tail, ≈ 3ε out)
 
 
 def property_map(phi: np.ndarray, liquid: float, gas: float) -> np.ndarray:
@@ -213,15 +216,39 @@ class TwoPhaseModel:
         self.set_output()
         self.last_dt = dt
 
-    def speed_max(self) -> float:
+    def speed_max(self, nodes: np.ndarray | None = None) -> float:
+        """max |u| [m/s] over the velocity nodes (those where ``nodes`` is True, if given)."""
         u = self.ns.U.x.array[self.ns.V_map].reshape(-1, self.gdim)
-        local = float(np.sqrt((u ** 2).sum(axis=1)).max(initial=0.0))
+        speed = np.sqrt((u ** 2).sum(axis=1))
+        local = float((speed if nodes is None else speed[nodes]).max(initial=0.0))
         return self.mesh.comm.allreduce(local, op=MPI.MAX)
 
-    def stable_dt(self, cfl: float) -> float:
-        """Δt = C·h_min/max|u| (inf at rest; the loop caps it with run.dt_max)."""
-        umax = self.speed_max()
-        return cfl * self.h_min / umax if umax > 0 else np.inf
+    def phi_at_velocity_nodes(self) -> np.ndarray:
+        """φ at each velocity node (both spaces are P1 on the same mesh; this rank incl. ghosts)."""
+        if getattr(self, "_v_to_phi", None) is None:
+            cells_v = self.ns.V.dofmap.list.array.reshape(-1, self.gdim + 1)
+            cells_phi = self.pf.V.dofmap.list.array.reshape(-1, self.gdim + 1)
+            self._v_to_phi = np.empty(self.ns.U.x.array[self.ns.V_map].size // self.gdim, np.int64)
+            self._v_to_phi[cells_v.ravel()] = cells_phi.ravel()
+        return self.pf.phi.x.array[self._v_to_phi]
+
+    def stable_dt(self, cfl: float, nodes: np.ndarray | None = None) -> float:
+        """Δt = C·h_min/max|u| (inf at rest; the loop caps it with run.dt_max). With
+        ``run.cfl_gas``: min(C·h_min/max_liquid|u|, C_gas·h_min/max_gas|u|), the liquid being
+        the nodes with φ ≥ :data:`GAS_PHI` (interface included). ``nodes``: only these count."""
+        cfl_gas = self.case.run.cfl_gas
+        if cfl_gas is None:
+            umax = self.speed_max(nodes)
+            return cfl * self.h_min / umax if umax > 0 else np.inf
+        liquid = self.phi_at_velocity_nodes() >= GAS_PHI
+        gas = ~liquid
+        if nodes is not None:
+            liquid, gas = liquid & nodes, gas & nodes
+        dt = np.inf
+        for courant, umax in ((cfl, self.speed_max(liquid)), (cfl_gas, self.speed_max(gas))):
+            if umax > 0:
+                dt = min(dt, courant * self.h_min / umax)
+        return dt
 
     # ------------------------------------------------------------ diagnostics
     def diagnostics(self) -> dict[str, float]:
