@@ -163,6 +163,22 @@ def test_a_checkpoint_is_accepted_under_any_of_the_given_fingerprints(tmp_path):
         read_checkpoint(ck, MPI.COMM_WORLD, "new-hash")
 
 
+def test_the_replaced_checkpoint_is_kept_one_interval_back(tmp_path):
+    """Session 21: a block kicked by one bad step could not be continued from before the kick,
+    because the only checkpoint was written after it. The replaced file is now kept."""
+    from mpi4py import MPI
+
+    from fcm_fsi.io.checkpoint import previous_checkpoint, read_checkpoint, write_checkpoint
+    ck = tmp_path / "checkpoint.h5"
+    assert previous_checkpoint(ck) == tmp_path / "checkpoint.previous.h5"
+    for step in (250, 500, 750):
+        write_checkpoint(ck, MPI.COMM_WORLD, "hash", step, step * 1e-3, 1e-3, {}, {"x": np.full(2, step)})
+    assert read_checkpoint(ck, MPI.COMM_WORLD, "hash").step == 750
+    earlier = read_checkpoint(previous_checkpoint(ck), MPI.COMM_WORLD, "hash")
+    assert earlier.step == 500 and np.all(earlier.globals["x"] == 500)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.h5", "checkpoint.previous.h5"]
+
+
 def test_series_csv_resumes_at_the_checkpoint_time(tmp_path):
     """A restart keeps the rows up to the checkpoint and drops those an earlier run wrote
     after it before stopping (they are computed again); a lazy series is created at its

@@ -15,7 +15,9 @@ class RunConfig:
     dt: float = param(unit="s", doc="(initial) time step of the outer (fluid or phase-field) loop", gt=0)
     cfl: float | None = param(None, doc="if set, adapt dt each step so that max|u|·dt/h stays at this Courant number", gt=0, le=10)
     cfl_gas: float | None = param(None, doc="with cfl and a phase field: the Courant number allowed at the gas nodes "
-                                  "(φ < 0.05); the liquid and the interface keep run.cfl (default: run.cfl everywhere)",
+                                  "(φ < 0.05); the liquid and the interface keep run.cfl (default: run.cfl everywhere). "
+                                  "Not for blocks that move through air into contact: it let a landing block be kicked "
+                                  "in block_overturn (docs/two-phase.md)",
                                   gt=0, le=10)
     dt_max: float | None = param(None, unit="s", doc="upper bound on the adapted dt (defaults to dt)", gt=0)
     log_every: int = param(10, unit="steps", doc="progress line every this many steps", ge=1)

@@ -7,7 +7,10 @@ matching, which must be exact (the mesh partition may differ between runs). Repl
 arrays (counters, DEM state) are written once (``/globals/<name>``). A restart needs the
 same case (its fingerprint is stored) and, by policy, the same number of ranks; anything
 else is refused with a message. The file is written to a temporary name and renamed,
-so a crash while writing leaves the previous checkpoint intact.
+so a crash while writing leaves the previous checkpoint intact. The checkpoint it replaces
+is kept as ``<name>.previous.h5`` (one interval earlier): a run that went wrong without
+diverging — e.g. a block kicked by one bad step (docs/coupling.md, session 21) — can then
+still be continued from before the event that the newest checkpoint already contains.
 """
 from __future__ import annotations
 
@@ -116,9 +119,16 @@ def nodal_values_at(coords: np.ndarray, stored: tuple[np.ndarray, np.ndarray], n
     return ck_values[idx]
 
 
+def previous_checkpoint(path: Path) -> Path:
+    """Where :func:`write_checkpoint` keeps the checkpoint that ``path`` replaced."""
+    path = Path(path)
+    return path.with_name(path.stem + ".previous.h5")
+
+
 def write_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str, step: int, time: float, dt: float,
                      fields: dict[str, tuple[np.ndarray, np.ndarray]], globals_: dict[str, np.ndarray]) -> None:
-    """Collective: gather owned nodal ``fields`` (coords, values) to rank 0 and write atomically."""
+    """Collective: gather owned nodal ``fields`` (coords, values) to rank 0 and write atomically;
+    the file it replaces becomes :func:`previous_checkpoint`."""
     gathered = {name: (comm.gather(np.ascontiguousarray(c), root=0), comm.gather(np.ascontiguousarray(v), root=0))
                 for name, (c, v) in fields.items()}
     if comm.rank == 0:
@@ -134,6 +144,8 @@ def write_checkpoint(path: Path, comm: MPI.Comm, fingerprint: str, step: int, ti
                 g.create_dataset("values", data=np.concatenate(vs))
             for name, a in globals_.items():
                 f.create_dataset(f"globals/{name}", data=a)
+        if path.exists():
+            os.replace(path, previous_checkpoint(path))
         os.replace(tmp, path)
     comm.barrier()
 
