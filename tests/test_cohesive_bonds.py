@@ -1,5 +1,7 @@
 """Face bonds: forces are the gradient of the stored energy, momentum is conserved,
 bending and torsion are resisted, and a DEM step through the interaction hook works."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -170,3 +172,38 @@ def test_block_damage_is_the_fraction_of_a_blocks_bonds_that_broke():
     np.testing.assert_array_equal(bonds.block_damage(4), [0.0, 0.0, 0.0, 0.0])
     bonds.broken[[0, 2, 3]] = True
     np.testing.assert_allclose(bonds.block_damage(4), [0.0, 0.5, 1.0, 0.0])
+
+
+def test_bond_report_ranks_points_by_the_largest_traction_they_carried(tmp_path, capsys):
+    """``python -m fcm_fsi.dem.bond_report``: λ_max from a checkpoint → σ/σ_c = 27/4 λ(1−λ)²
+    (capped at the peak 1 once past λ = 1/3; 0 once broken), most loaded first, located on
+    the structure as built; a checkpoint of another structure is refused."""
+    import h5py
+
+    from fcm_fsi.config import load_case
+    from fcm_fsi.dem.bond_report import main
+    from fcm_fsi.dem.cohesive import shape_g
+    from fcm_fsi.dem.model import build_system
+    case_path = Path(__file__).resolve().parents[1] / "cases" / "bonded_wall_surge.yaml"
+    system = build_system(load_case(case_path).dem)
+    bonds = next(it for it in system.interactions if hasattr(it, "broken_bonds"))
+    lam = np.zeros(bonds.n_points)
+    lam[3], lam[5], lam[7] = 0.2, 0.5, 0.05
+    broken = np.zeros(bonds.n_points, bool)
+    broken[7] = True
+    ck = tmp_path / "checkpoint.h5"
+    with h5py.File(ck, "w") as f:
+        f["globals/dem_int1__bond_lam_max"] = lam
+        f["globals/dem_int1__bond_broken"] = broken
+    assert main([str(case_path), str(ck), "--top", "3"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith(f"{bonds.n_points} bond points, 1 broken, 1 past the peak")
+    rows = [line.split() for line in out[2:]]
+    assert [int(r[0]) for r in rows[:2]] == [5, 3]
+    assert float(rows[0][-1]) == pytest.approx(1.0) and float(rows[1][-1]) == pytest.approx(shape_g(0.2), abs=1e-3)
+    x = system.state.pos[bonds.pt_a[3]] + bonds.pt_ra[3]
+    assert [float(v) for v in rows[1][3:6]] == pytest.approx(list(x), abs=0.006)
+    with h5py.File(ck, "w") as f:
+        f["globals/dem_int1__bond_lam_max"] = np.zeros(bonds.n_points + 1)
+    assert main([str(case_path), str(ck)]) == 2
+    assert "not this case's checkpoint" in capsys.readouterr().err

@@ -1,0 +1,117 @@
+"""How close a bonded structure is to breaking, read from a checkpoint.
+
+Every bond point keeps the largest opening λ = δ/δ_f it has reached (``lam_max``, in the
+checkpoint's DEM state). Eq 28 turns it into the largest traction the point has carried,
+σ/σ_c = 27/4·λ(1 − λ)², whose peak 1 is at λ = 1/3; the point breaks at λ = 1. The report
+lists the most loaded points with their two blocks and where they sit in the structure as
+built (the blocks' initial poses), and summarises the rest::
+
+    python -m fcm_fsi.dem.bond_report cases/tsunami_building.yaml OUTPUT/checkpoint.h5 --top 10
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..config.loader import ConfigError
+from .cohesive import shape_g
+
+
+@dataclass(frozen=True)
+class BondPointLoad:
+    point: int
+    bond: int
+    block_a: int
+    block_b: int
+    position: np.ndarray     # (3,) [m] in the structure as built
+    lam_max: float           # largest δ/δ_f reached [-]
+    traction_ratio: float    # largest traction carried / σ_c [-] (eq 28 at lam_max; 0 once broken)
+    broken: bool
+
+
+def read_bond_state(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(lam_max, broken) per bond point from a checkpoint (coupled or DEM): the datasets whose
+    names end in ``bond_lam_max`` and ``bond_broken``."""
+    import h5py
+    found: dict[str, np.ndarray] = {}
+
+    def visit(name, obj):
+        for key in ("bond_lam_max", "bond_broken"):
+            if isinstance(obj, h5py.Dataset) and name.endswith(key):
+                found[key] = obj[()]
+    try:
+        with h5py.File(path, "r") as f:
+            f.visititems(visit)
+    except OSError as err:
+        raise ConfigError(f"{path}: not a readable HDF5 checkpoint ({err})") from None
+    if "bond_lam_max" not in found:
+        raise ConfigError(f"{path}: holds no bond state (a case without bonded blocks?)")
+    lam = np.asarray(found["bond_lam_max"], float)
+    broken = np.asarray(found.get("bond_broken", np.zeros(lam.shape, bool)), bool)
+    return lam, broken
+
+
+def bond_point_loads(bonds, block_pos: np.ndarray, lam_max: np.ndarray,
+                     broken: np.ndarray) -> list[BondPointLoad]:
+    """Every bond point of ``bonds`` (a :class:`~fcm_fsi.dem.cohesive.CohesiveBonds`) with its
+    load, most loaded first; ``block_pos`` = the blocks' centres as built (the points'
+    offsets ``pt_ra`` are in that frame)."""
+    if lam_max.shape != (bonds.n_points,):
+        raise ConfigError(f"the checkpoint has {lam_max.size} bond points, the case builds "
+                          f"{bonds.n_points}: not this case's checkpoint")
+    where = block_pos[bonds.pt_a] + bonds.pt_ra
+    ratio = np.where(broken, 0.0, shape_g(np.minimum(lam_max, 1.0 / 3.0)))   # largest carried: ≤ the peak
+    order = np.lexsort((-lam_max, -ratio))
+    return [BondPointLoad(int(i), int(bonds.pt_bond[i]), int(bonds.pt_a[i]), int(bonds.pt_b[i]),
+                          where[i], float(lam_max[i]), float(ratio[i]), bool(broken[i])) for i in order]
+
+
+def summary(loads: list[BondPointLoad]) -> dict[str, float]:
+    lam = np.array([p.lam_max for p in loads])
+    return {"points": float(lam.size), "broken": float(sum(p.broken for p in loads)),
+            "largest_traction_ratio": max((p.traction_ratio for p in loads), default=0.0),
+            "past_peak": float(np.count_nonzero(lam > 1.0 / 3.0)),
+            "share_above_0.1_sigma_c": float(np.mean([p.traction_ratio > 0.1 for p in loads])) if loads else 0.0}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.dem.bond_report", description=__doc__.split("\n\n")[0])
+    ap.add_argument("case", type=Path)
+    ap.add_argument("checkpoint", type=Path)
+    ap.add_argument("--top", type=int, default=10, help="points to list (default 10)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="the same overrides as the run (only the dem section matters)")
+    args = ap.parse_args(argv)
+    from ..config import load_case
+    from .model import build_system
+    try:
+        case = load_case(args.case, args.set)
+        if case.dem is None:
+            raise ConfigError(f"{args.case}: has no dem section")
+        system = build_system(case.dem)
+        bonds = next((it for it in system.interactions if hasattr(it, "broken_bonds")), None)
+        if bonds is None:
+            raise ConfigError(f"{args.case}: no bonded blocks in this case")
+        lam, broken = read_bond_state(args.checkpoint)
+        loads = bond_point_loads(bonds, system.state.pos.copy(), lam, broken)
+    except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    s = summary(loads)
+    print(f"{int(s['points'])} bond points, {int(s['broken'])} broken, {int(s['past_peak'])} past the peak "
+          f"(λ > 1/3); largest traction carried {s['largest_traction_ratio']:.2f} σ_c; "
+          f"{100 * s['share_above_0.1_sigma_c']:.1f} % of the points above 0.1 σ_c")
+    print("point  bond  blocks      x [m]    y [m]    z [m]   lam_max  traction/σ_c")
+    for p in loads[:args.top]:
+        state = "broken" if p.broken else f"{p.traction_ratio:.3f}"
+        print(f"{p.point:5d} {p.bond:5d} {p.block_a:4d}-{p.block_b:<4d} {p.position[0]:8.2f} {p.position[1]:8.2f} "
+              f"{p.position[2]:8.2f}   {p.lam_max:.4f}   {state}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
