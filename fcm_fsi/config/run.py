@@ -16,8 +16,8 @@ class RunConfig:
     cfl: float | None = param(None, doc="if set, adapt dt each step so that max|u|·dt/h stays at this Courant number", gt=0, le=10)
     cfl_gas: float | None = param(None, doc="with cfl and a phase field: the Courant number allowed at the gas nodes "
                                   "(φ < 0.05); the liquid and the interface keep run.cfl (default: run.cfl everywhere). "
-                                  "Not for blocks that move through air into contact: it let a landing block be kicked "
-                                  "in block_overturn (docs/two-phase.md)",
+                                  "Not for blocks that land in contact: the larger steps let the explicit coupling's force "
+                                  "oscillation grow and kick the block in block_overturn (docs/two-phase.md)",
                                   gt=0, le=10)
     dt_max: float | None = param(None, unit="s", doc="upper bound on the adapted dt (defaults to dt)", gt=0)
     log_every: int = param(10, unit="steps", doc="progress line every this many steps", ge=1)
