@@ -60,6 +60,8 @@ def test_render_writes_front_and_back_views(tmp_path):
     assert main([str(tmp_path), "--times", "0.4"]) == 0
     assert (tmp_path / "snapshot_t0.4_front.png").stat().st_size > 10_000
     assert (tmp_path / "snapshot_t0.4_back.png").exists()
+    assert main([str(tmp_path), "--times", "0.5", "--png-dir", str(tmp_path / "new" / "pngs")]) == 0   # created
+    assert (tmp_path / "new" / "pngs" / "snapshot_t0.5_front.png").exists()
     with h5py.File(tmp_path / "fields.h5", "a") as f:
         del f["Mesh/mesh/topology"]
         f["Mesh/mesh/topology"] = tets[:, :3]

@@ -116,6 +116,7 @@ def render(out_dir: Path, time: float, png_dir: Path | None = None, views=VIEWS)
     from ..dem.output import read_pvd
     out_dir = Path(out_dir)
     png_dir = Path(png_dir) if png_dir is not None else out_dir
+    png_dir.mkdir(parents=True, exist_ok=True)
     stored = field_times(out_dir)
     if not stored:
         raise FileNotFoundError(f"{out_dir}: no fields*.h5 with a phase field 'phi' (run with output.xdmf: true)")
