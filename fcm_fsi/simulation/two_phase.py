@@ -136,6 +136,7 @@ class TwoPhaseModel:
             gravity = (tuple(fl.gravity) + (0.0,) * 3)[:self.gdim]
             self.static = StaticPressure(self.ns, ns_options["static_pressure"], self.rho, np.array(gravity))
         self.u_adv = fem.Function(self.ns.V, name="u_advect")   # velocity seen by φ
+        self._v_to_phi = None   # φ dof at each velocity node (phi_at_velocity_nodes, built on first use)
         self.advection_filter = None   # optional fn(u_adv array) editing it in place (coupled runs)
         self.h_interface = interface_cell_size(case, self.h_min)
         self.pf = PhaseField(self.mesh, case.phase_field, self.h_interface, self.u_adv,
@@ -225,10 +226,10 @@ class TwoPhaseModel:
 
     def phi_at_velocity_nodes(self) -> np.ndarray:
         """φ at each velocity node (both spaces are P1 on the same mesh; this rank incl. ghosts)."""
-        if getattr(self, "_v_to_phi", None) is None:
+        if self._v_to_phi is None:
             cells_v = self.ns.V.dofmap.list.array.reshape(-1, self.gdim + 1)
             cells_phi = self.pf.V.dofmap.list.array.reshape(-1, self.gdim + 1)
-            self._v_to_phi = np.empty(self.ns.U.x.array[self.ns.V_map].size // self.gdim, np.int64)
+            self._v_to_phi = np.empty(len(self.ns.V_map) // self.gdim, np.int64)
             self._v_to_phi[cells_v.ravel()] = cells_phi.ravel()
         return self.pf.phi.x.array[self._v_to_phi]
 
