@@ -49,3 +49,6 @@ def test_recorded_load_reads_the_nearest_row_and_refuses_another_case(tmp_path):
         recorded_load(p, 0.2, 3)
     with pytest.raises(ConfigError, match="outside the recorded"):
         recorded_load(p, 0.5, 2)
+    with p.open("a") as f:                 # a run killed mid-write: half a step at the end
+        f.write("0.4,0,9,0,0,0,0,0\n")
+    assert recorded_load(p, 0.3, 2).time == pytest.approx(0.3)

@@ -57,7 +57,10 @@ def recorded_load(path: Path, time: float, nb: int) -> RecordedLoad:
     n = int(d["block"].max()) + 1
     if n != nb:
         raise ConfigError(f"{path}: has {n} blocks, the case builds {nb}: not this case's run")
-    t = d["t"].reshape(-1, nb)[:, 0]
+    whole = d["t"].size // nb * nb          # a run killed mid-write may leave a partial last step
+    if whole == 0:
+        raise ConfigError(f"{path}: holds no complete step")
+    t = d["t"][:whole].reshape(-1, nb)[:, 0]
     if not t[0] - 1e-9 <= time <= t[-1] + 1e-9:
         raise ConfigError(f"--time {time} s is outside the recorded [{t[0]:.6g}, {t[-1]:.6g}] s of {path}")
     i = int(np.argmin(np.abs(t - time)))
