@@ -55,6 +55,27 @@ def read_bond_state(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return lam, broken
 
 
+def traction_ratio(lam_max):
+    """Largest traction a bond point has carried / σ_c: eq 28 at its largest opening λ_max,
+    capped at the peak 1 once past λ = 1/3."""
+    return shape_g(np.minimum(lam_max, 1.0 / 3.0))
+
+
+def bonded_structure(case_path: Path, overrides: list[str], with_ledger: bool = True):
+    """(DEM system, its cohesive bonds) of the case at ``case_path``; ConfigError when the case
+    has no DEM or no bonded blocks."""
+    from ..config import load_case
+    from .model import build_system
+    case = load_case(case_path, overrides)
+    if case.dem is None:
+        raise ConfigError(f"{case_path}: has no dem section")
+    system = build_system(case.dem, with_ledger=with_ledger)
+    bonds = next((it for it in system.interactions if hasattr(it, "broken_bonds")), None)
+    if bonds is None:
+        raise ConfigError(f"{case_path}: no bonded blocks in this case")
+    return system, bonds
+
+
 def bond_point_loads(bonds, block_pos: np.ndarray, lam_max: np.ndarray,
                      broken: np.ndarray) -> list[BondPointLoad]:
     """Every bond point of ``bonds`` (a :class:`~fcm_fsi.dem.cohesive.CohesiveBonds`) with its
@@ -64,7 +85,7 @@ def bond_point_loads(bonds, block_pos: np.ndarray, lam_max: np.ndarray,
         raise ConfigError(f"the checkpoint has {lam_max.size} bond points, the case builds "
                           f"{bonds.n_points}: not this case's checkpoint")
     where = block_pos[bonds.pt_a] + bonds.pt_ra
-    ratio = np.where(broken, 0.0, shape_g(np.minimum(lam_max, 1.0 / 3.0)))   # largest carried: ≤ the peak
+    ratio = np.where(broken, 0.0, traction_ratio(lam_max))
     order = np.lexsort((-lam_max, -ratio))
     return [BondPointLoad(int(i), int(bonds.pt_bond[i]), int(bonds.pt_a[i]), int(bonds.pt_b[i]),
                           where[i], float(lam_max[i]), float(ratio[i]), bool(broken[i])) for i in order]
@@ -86,16 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="the same overrides as the run (only the dem section matters)")
     args = ap.parse_args(argv)
-    from ..config import load_case
-    from .model import build_system
     try:
-        case = load_case(args.case, args.set)
-        if case.dem is None:
-            raise ConfigError(f"{args.case}: has no dem section")
-        system = build_system(case.dem)
-        bonds = next((it for it in system.interactions if hasattr(it, "broken_bonds")), None)
-        if bonds is None:
-            raise ConfigError(f"{args.case}: no bonded blocks in this case")
+        system, bonds = bonded_structure(args.case, args.set)
         lam, broken = read_bond_state(args.checkpoint)
         loads = bond_point_loads(bonds, system.state.pos.copy(), lam, broken)
     except ConfigError as err:

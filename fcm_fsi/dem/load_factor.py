@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config.loader import ConfigError
-from .cohesive import shape_g
+from .bond_report import bonded_structure, traction_ratio
 
 
 @dataclass(frozen=True)
@@ -95,7 +95,7 @@ def ramp_to_first_break(system, bonds, load: RecordedLoad, *, max_factor: float,
             first_peak = alpha
         broke = bool(bonds.broken.any())
         if k % every == 0 or broke or k == n_ramp:
-            row = (alpha, float(shape_g(np.minimum(bonds.lam_max.max(), 1.0 / 3.0))), float(np.count_nonzero(bonds.broken)))
+            row = (alpha, float(traction_ratio(bonds.lam_max.max())), float(np.count_nonzero(bonds.broken)))
             history.append(row)
             if progress is not None:
                 progress(row)
@@ -114,18 +114,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="simulated time [s] of the ramp 0 → max factor (default 3; slow against the structure's periods)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="case overrides (the dem section matters)")
     args = ap.parse_args(argv)
-    from ..config import load_case
-    from .model import build_system
     try:
         if not args.max_factor > 0 or not args.ramp > 0:
             raise ConfigError(f"--max-factor ({args.max_factor}) and --ramp ({args.ramp}) must be > 0")
-        case = load_case(args.case, args.set)
-        if case.dem is None:
-            raise ConfigError(f"{args.case}: has no dem section")
-        system = build_system(case.dem, with_ledger=False)
-        bonds = next((it for it in system.interactions if hasattr(it, "broken_bonds")), None)
-        if bonds is None:
-            raise ConfigError(f"{args.case}: no bonded blocks in this case")
+        system, bonds = bonded_structure(args.case, args.set, with_ledger=False)
         load = recorded_load(args.bodies, args.time, system.state.nb)
         pos0 = system.state.pos.copy()
         total = load.force.sum(axis=0)
