@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config.loader import ConfigError
+from ..io.csv import read_series
 from .bond_report import bonded_structure, traction_ratio
 
 
@@ -46,7 +47,6 @@ class PushoverResult:
 
 def recorded_load(path: Path, time: float, nb: int) -> RecordedLoad:
     """Fluid force and torque on every block at the ``bodies.csv`` row nearest ``time``."""
-    from ..verify.cases.phase_field import read_series
     try:
         d = read_series(path)
     except OSError as err:

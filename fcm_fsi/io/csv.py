@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 
 class TimeSeriesCSV:
     """``columns`` maps column name → unit; header is ``name [unit]``.
@@ -72,3 +74,12 @@ def drop_rows_after(path: Path, t: float) -> int:
     Path(path).write_text(lines[0] + "".join(keep))
     return len(lines) - 1 - len(keep)
 
+
+
+def read_series(path: Path) -> dict[str, np.ndarray]:
+    """Columns of a CSV written by :class:`TimeSeriesCSV` (series.csv, bodies.csv, ...) by
+    name, the units stripped from the header."""
+    path = Path(path)
+    names = [h.split(" [")[0] for h in path.read_text().splitlines()[0].split(",")]
+    data = np.atleast_2d(np.loadtxt(path, delimiter=",", skiprows=1))
+    return {n: data[:, i] for i, n in enumerate(names)}

@@ -11,6 +11,7 @@ from mpi4py import MPI
 from dolfinx import fem
 
 from ...config import case_from_dict
+from ...io.csv import read_series  # noqa: F401  (re-exported: the verification cases read their CSVs through it)
 from ...simulation.loop import TimeLoop
 from ...simulation.phase_field import PhaseFieldModel
 from ..registry import Metric, at_least, at_most, in_interval, register, report_only
@@ -75,13 +76,6 @@ def gather_field(model: PhaseFieldModel, values: np.ndarray) -> tuple[np.ndarray
     xs = comm.gather(model.pf.V.tabulate_dof_coordinates()[:, :2], root=0)
     vs = comm.gather(values, root=0)
     return (np.vstack(xs), np.concatenate(vs)) if comm.rank == 0 else None
-
-
-def read_series(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a time-loop CSV by name (units stripped from the header)."""
-    names = [h.split(" [")[0] for h in path.read_text().splitlines()[0].split(",")]
-    data = np.atleast_2d(np.loadtxt(path, delimiter=",", skiprows=1))
-    return {n: data[:, i] for i, n in enumerate(names)}
 
 
 def plot_rotation(out: Path, runs: dict[str, Path], finals: dict, initial) -> None:
