@@ -381,7 +381,7 @@ def test_coupled_wall_motion_uses_the_intact_bonds_clusters(one_numba_thread):
                            inertia0=st.inertia.copy(), gyration=np.ones(3),
                            case=SimpleNamespace(coupling=SimpleNamespace(wall_velocity="end",
                                                                          wall_motion="bonded_cluster")))
-    for name in ("_by_cluster", "_cluster_labels", "_cluster_rigid"):      # the helpers it calls
+    for name in ("_by_cluster", "_cluster_labels", "_bonded_labels", "_cluster_rigid"):      # the helpers it calls
         setattr(fake, name, getattr(CoupledModel, name).__get__(fake))
     X, V, W = CoupledModel._wall_motion(fake)
     np.testing.assert_allclose(V[0], [0.5, 0.0, 0.0])

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fcm_fsi.coupling.dem_side import rigid_body_velocity
 from fcm_fsi.dem.bodies import axis_angle_quat
 from fcm_fsi.dem.state import DEMState, quat_to_matrix_np
-from fcm_fsi.fcm.levelset import Shapes, StructureLevelSet, signed_distance_reference
+from fcm_fsi.fcm.levelset import NO_SHAPE, WALL, Shapes, StructureLevelSet, signed_distance_reference
 
 pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
@@ -73,13 +74,17 @@ def test_gap_fill_kernel_matches_reference(gap):
     cutoff = 0.1
     ls = StructureLevelSet(shapes, 20, cutoff, gap=gap, walls=walls)
     phi, owner = ls.evaluate(x, pos, quat)
-    on_wall = np.zeros(len(x), bool)
-    phi_ref, owner_ref = signed_distance_reference(x, shapes, pos, quat, cutoff, gap=gap, walls=walls,
-                                                   on_wall=on_wall)
+    fill = np.full((len(x), 2), NO_SHAPE, np.int64), np.zeros((len(x), 2))
+    phi_ref, owner_ref = signed_distance_reference(x, shapes, pos, quat, cutoff, gap=gap, walls=walls, fill=fill)
+    on_wall = fill[0][:, 0] == WALL
     plain, _ = signed_distance_reference(x, shapes, pos, quat, cutoff)
     np.testing.assert_allclose(phi, phi_ref, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(owner, owner_ref)
-    np.testing.assert_array_equal(ls.on_wall, on_wall)
+    np.testing.assert_array_equal(ls.fill_other, fill[0])
+    np.testing.assert_allclose(ls.fill_weight, fill[1], rtol=0, atol=1e-12)
+    blended = (ls.fill_weight > 0) & (ls.fill_weight < 1)
+    assert blended[:, 0].sum() > 10 and (blended[:, 1].sum() > 10 or gap < 0.05)   # two (and three) owners mixed
+    assert np.all(ls.fill_weight[ls.fill_other == NO_SHAPE] == 0) and np.all(ls.fill_weight.sum(axis=1) <= 1)
     assert 0 < on_wall.sum() < (phi < plain - 1e-12).sum()   # fills against walls and between bodies
     filled = (phi < 0) & (plain > 0)
     assert filled.sum() > 10                      # the test sees fill (19 and 250 points)
@@ -107,6 +112,41 @@ def test_gap_fill_closes_a_sub_gap_layer_under_a_block():
     np.testing.assert_array_equal(ls.on_wall, [True, True, True, True, False])
     plain, _ = StructureLevelSet(block, 1, 0.1).evaluate(x, pos, quat)
     assert np.all(plain[:3] > 0) and 0 < phi[3] < plain[3]
+
+
+def test_gap_fill_velocity_is_continuous_and_each_surface_keeps_its_own():
+    """The fill's wall velocity ū = (1 − w) ū_owner + w ū_other is continuous across the fill
+    (its jumps between neighbouring samples shrink with their spacing), equals the floor's 0
+    on the floor and the block's v on the block, and the block's v where the fill ends: a
+    block 3 mm above the floor and 4 mm from a static stopper, gap 5 mm, moving at v."""
+    from fcm_fsi.coupling.dem_side import blended_rigid_velocity
+    shapes = Shapes.concat([Shapes.box((0, 0, 0), (0.2, 0.1, 0.1), body=0),
+                            Shapes.box((0.654, 0.05, 0.0), (0.1, 0.1, 0.1))])        # static, 4 mm gap
+    pos, quat = np.array([[0.5, 0.053, 0.0]]), np.array([[1.0, 0, 0, 0]])
+    v, omega = np.array([[0.3, -0.2, 0.0]]), np.array([[0.0, 0.0, 2.0]])
+    ls = StructureLevelSet(shapes, 1, 0.1, gap=0.005, walls=np.array([[0, 0, 0, 0, 1.0, 0]]))
+
+    def ubar(x):
+        phi, owner = ls.evaluate(x, pos, quat)
+        return blended_rigid_velocity(pos, v, omega, x, owner, ls.fill_other, ls.fill_weight)
+
+    def largest_jump(spacing):
+        gx, gy = np.arange(0.45, 0.606, spacing), np.arange(0.0, 0.012, spacing)
+        X, Y = np.meshgrid(gx, gy, indexing="ij")
+        u = ubar(np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])).reshape(*X.shape, 3)
+        return max(np.abs(np.diff(u, axis=0)).max(), np.abs(np.diff(u, axis=1)).max())
+
+    coarse, fine = largest_jump(2e-4), largest_jump(5e-5)
+    speed = np.linalg.norm(v) + 2.0 * 0.11
+    assert fine < 0.1 * speed and fine < 0.35 * coarse        # a jump would not shrink with the spacing
+    x = np.array([[0.5, 0.0, 0.0],        # on the floor under the block: the floor's 0
+                  [0.5, 0.003, 0.0],      # on the block's underside: the block's velocity
+                  [0.5, 0.0015, 0.0],     # mid-layer: the mean
+                  [0.602, 0.03, 0.0],     # mid-gap to the stopper: the mean of v and 0
+                  [0.59, 0.02, 0.0]])     # inside the block, 1 cm from its side: its own
+    rigid = rigid_body_velocity(pos, v, omega, x, np.zeros(len(x), np.int64))
+    np.testing.assert_allclose(ubar(x), [0 * rigid[0], rigid[1], 0.5 * rigid[2], 0.5 * rigid[3], rigid[4]],
+                               atol=1e-12)
 
 
 def test_sphere_distance():

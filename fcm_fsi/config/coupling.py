@@ -52,10 +52,17 @@ class CouplingConfig:
                  "(then the full floating_box level diverges at the contact line, docs/coupling.md)", ge=0, le=100)
     gap_fill: float | None = param(
         None, unit="m", doc="fluid gaps narrower than this between a block and a DEM plane/box wall or another block "
-                            "count as solid: level set min(φ, (d₁ + d₂ − δ)/2) over the two nearest owners, the fill "
-                            "moving with the nearer block (a sub-cell gap under a block resting on the floor otherwise "
-                            "squeezes it to the floor, docs/coupling.md); default = the smallest cell; 0 = off; "
+                            "count as solid: level set min(φ, (d₁ + d₂ − δ)/2) over the two nearest owners, the fill's "
+                            "load going to the nearer block and its wall velocity a continuous mix of the nearest "
+                            "three owners' (each surface keeps its own; a wall's is 0) (a sub-cell gap under a block "
+                            "resting on the floor otherwise squeezes it to the floor, docs/coupling.md); default = "
+                            "the smallest cell; 0 = off; "
                             "must be below the level-set band", ge=0)
+    vent_pockets: bool = param(True, doc="where the gap fill seals fluid off from the rest (a block landing "
+                                         "beside a stopper on the floor traps water that the real, narrowing gap "
+                                         "would let out), remove the fill — between owners free to part, not the "
+                                         "blocks of one bonded structure — around the pocket until it reaches the "
+                                         "rest of the fluid again (fcm/pockets.py, docs/coupling.md)")
     min_thickness: float = param(0.0, unit="m", doc="box blocks (and structure blocks) thinner than this are widened "
                                                   "to it in the fluid's level set only (the DEM keeps their true "
                                                   "size): a wall thinner than about one cell falls between the mesh "

@@ -216,6 +216,19 @@ def rigid_body_velocity(pos: np.ndarray, vel: np.ndarray, omega: np.ndarray, poi
     return u
 
 
+def blended_rigid_velocity(pos, vel, omega, points, owner, other, weight) -> np.ndarray:
+    """ū = (1 − Σ_k w_k) ū_owner + Σ_k w_k ū_other_k [m/s] at ``points`` (n, 3) [m]: blocks'
+    rigid velocities (:func:`rigid_body_velocity`; a negative index — static, wall, none —
+    moves with 0) mixed by ``weight`` (n,) or (n, k) over the blocks ``other`` of the same
+    shape: the wall velocity where owners meet (the gap fill, ``coupling.load_split: shared``)."""
+    other = np.asarray(other, np.int64).reshape(len(points), -1)
+    weight = np.asarray(weight, np.float64).reshape(len(points), -1)
+    u = (1.0 - weight.sum(axis=1))[:, None] * rigid_body_velocity(pos, vel, omega, points, owner)
+    for k in range(other.shape[1]):
+        u += weight[:, k, None] * rigid_body_velocity(pos, vel, omega, points, other[:, k])
+    return u
+
+
 def bonded_clusters(nb: int, bond_a: np.ndarray, bond_b: np.ndarray, intact: np.ndarray) -> np.ndarray:
     """Label (nb,) of the cluster each block belongs to: the connected components of the
     blocks over the bonds a–b that are still ``intact`` (an unbonded block is its own cluster)."""

@@ -48,7 +48,7 @@ from fcm_fsi.dem.state import quat_to_matrix_np
 SPHERE, BOX, CYLINDER = 0, 1, 2
 NO_SHAPE = -2            # owner of points with no primitive within the cutoff
 STATIC = -1              # body index of a static (world-frame) primitive
-WALL = -3                # the walls, as one owner of the gap-fill search (never returned)
+WALL = -3                # the walls, as one owner of the gap-fill search (only in fill_other)
 
 
 # --------------------------------------------------------------------------- shapes
@@ -265,7 +265,7 @@ def _point_cell(x, lo, dims, cell):
 
 @numba.njit(cache=True, parallel=True)
 def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, start, items,
-              planes, gap, phi, owner, on_wall, second, margin):
+              planes, gap, phi, owner, fill_other, fill_weight, second, margin):
     """Clipped union distance φ and owner body at every point; returns the number of
     (point, primitive) candidates read from the bins (the search cost). ``second`` and
     ``margin`` get the nearest other owner (bodies and static shapes, not the walls) and how
@@ -275,16 +275,25 @@ def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, st
     the walls ``planes`` (np, 6) = point, unit normal into the fluid) is filled where the two
     nearest are less than ``gap`` apart: φ = min(φ, (d₁ + d₂ − gap)/2), d₁ ≤ d₂ the
     distances to the nearest two owners (all walls count as one, so tank corners are not
-    filled); the fill belongs to the nearer non-wall owner, and ``on_wall`` marks the points
-    where the fill between a body and a wall attains φ — inside it and in the fluid next to
-    it, so that the wall velocity (the fill rests with the wall) is continuous across its
-    surface."""
+    filled); the fill belongs to the nearer non-wall owner (its load goes there).
+
+    Where the fill attains φ (inside it and in the fluid next to it) its wall velocity mixes
+    the nearest three owners' (a wall's is 0), ū = Σ_k w_k ū_k (:func:`_fill_weights`):
+    ``fill_other`` (n, 2) gets the two owners besides ``owner`` (WALL for the walls; column
+    0 the other of the nearest two) and ``fill_weight`` (n, 2) their weights w, the owner
+    keeping 1 − Σ w. So ū is continuous in space — each surface's own velocity on it (a
+    floor's 0 under a block), the owner's where the fill ends, the mean where two are equally
+    near, also where a block lands beside a fixed stopper on the floor (three owners) — and
+    hence in time as gaps open and close. A fill velocity that jumps from one owner's to
+    another's as a node changes side gave the pressure impulses of docs/coupling.md
+    (block_overturn, session 22)."""
     tests = 0
     for i in numba.prange(x.shape[0]):
         best = cutoff
         arg = -1
-        d1, o1 = cutoff, NO_SHAPE           # nearest owner and the nearest other owner (gap fill)
+        d1, o1 = cutoff, NO_SHAPE           # the nearest three distinct owners (gap fill)
         d2, o2 = cutoff, NO_SHAPE
+        d3, o3 = cutoff, NO_SHAPE
         c = _point_cell(x[i], lo, dims, cell)
         if c >= 0:
             for k in range(start[c], start[c + 1]):
@@ -302,7 +311,7 @@ def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, st
                 if d < best:
                     best = d
                     arg = s
-                d1, o1, d2, o2 = _two_nearest(d, body[s], d1, o1, d2, o2)
+                d1, o1, d2, o2, d3, o3 = _three_nearest(d, body[s], d1, o1, d2, o2, d3, o3)
             tests += start[c + 1] - start[c]
         phi[i] = max(best, -cutoff)
         owner[i] = NO_SHAPE if arg < 0 else body[arg]
@@ -312,26 +321,54 @@ def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, st
             for w in range(planes.shape[0]):
                 d = ((x[i, 0] - planes[w, 0]) * planes[w, 3] + (x[i, 1] - planes[w, 1]) * planes[w, 4]
                      + (x[i, 2] - planes[w, 2]) * planes[w, 5])
-                d1, o1, d2, o2 = _two_nearest(d, WALL, d1, o1, d2, o2)
+                d1, o1, d2, o2, d3, o3 = _three_nearest(d, WALL, d1, o1, d2, o2, d3, o3)
             fill = 0.5 * (d1 + d2 - gap)
             if o2 != NO_SHAPE and fill < phi[i]:
                 phi[i] = max(fill, -cutoff)
-                owner[i] = o2 if o1 == WALL else o1
-                on_wall[i] = o1 == WALL or o2 == WALL
+                w1, w2, w3 = _fill_weights(d1, d2, d3 if o3 != NO_SHAPE else cutoff + gap, gap)
+                if o1 == WALL:
+                    owner[i] = o2
+                    fill_other[i, 0], fill_weight[i, 0] = WALL, w1
+                else:
+                    owner[i] = o1
+                    fill_other[i, 0], fill_weight[i, 0] = o2, w2
+                fill_other[i, 1], fill_weight[i, 1] = o3, w3
     return tests
 
 
 @numba.njit(cache=True, inline="always")
-def _two_nearest(d, o, d1, o1, d2, o2):
-    """Update (d₁, o₁) = the nearest candidate and (d₂, o₂) = the nearest one of another
-    owner with candidate distance d of owner o."""
+def _fill_weights(d1, d2, d3, gap):
+    """Weights (w₁, w₂, w₃), Σ = 1, of the nearest three owners' velocities in the gap fill at
+    distances d₁ ≤ d₂ ≤ d₃ [m]: w_k ∝ t_k/d_k, the inverse distance (a squeezed layer's
+    linear profile between two surfaces) times the taper t_k = max(0, 1 − (d_k − d₁)/gap),
+    which ends an owner's share where the fill ends (d_k − d₁ = gap); on or inside the
+    nearest surface (d₁ ≤ 0) its own velocity."""
+    if d1 <= 0.0:
+        return 1.0, 0.0, 0.0
+    p1 = 1.0 / d1
+    p2 = max(1.0 - (d2 - d1) / gap, 0.0) / d2
+    p3 = max(1.0 - (d3 - d1) / gap, 0.0) / d3
+    total = p1 + p2 + p3
+    return p1 / total, p2 / total, p3 / total
+
+
+@numba.njit(cache=True, inline="always")
+def _three_nearest(d, o, d1, o1, d2, o2, d3, o3):
+    """Update the nearest three distinct owners (d₁, o₁) ≤ (d₂, o₂) ≤ (d₃, o₃) with candidate
+    distance d of owner o (an owner's distance is the least of its candidates')."""
     if o == o1:
-        return min(d, d1), o1, d2, o2
-    if d < d1:
-        return d, o, d1, o1
-    if d < d2:
-        return d1, o1, d, o
-    return d1, o1, d2, o2
+        d1 = min(d, d1)
+    elif o == o2:
+        d2 = min(d, d2)
+    elif o == o3:
+        d3 = min(d, d3)
+    elif d < d3:
+        d3, o3 = d, o
+    if d3 < d2:
+        d2, o2, d3, o3 = d3, o3, d2, o2
+    if d2 < d1:
+        d1, o1, d2, o2 = d2, o2, d1, o1
+    return d1, o1, d2, o2, d3, o3
 
 
 # --------------------------------------------------------------------------- interface
@@ -364,8 +401,13 @@ class StructureLevelSet:
         self._max_cells = 64 * len(shapes) + 4096
         self.pair_tests = 0
         self.bin_entries = 0
-        self.on_wall = np.zeros(0, bool)
+        self.fill_other, self.fill_weight = np.zeros((0, 2), np.int64), np.zeros((0, 2))
         self.second_owner, self.owner_margin = np.zeros(0, np.int64), np.zeros(0)
+
+    @property
+    def on_wall(self) -> np.ndarray:
+        """(n,) bool: the points of the last :meth:`evaluate` whose gap fill is between a body and a wall."""
+        return self.fill_other[:, 0] == WALL
 
     def evaluate(self, x: np.ndarray, body_pos: np.ndarray, body_quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """φ and owner at the points ``x`` (n, 3) [m] (2D meshes pass z = 0).
@@ -374,7 +416,9 @@ class StructureLevelSet:
         body → world. Returns φ (n,) [m], > 0 in the fluid, < 0 inside the structure, clipped
         to [−cutoff, cutoff], and owner (n,) int64: the body of the primitive attaining the
         minimum (−1 static), −2 where no primitive is closer than the cutoff. With a gap fill,
-        ``self.on_wall`` (n,) marks the filled points between a body and a wall afterwards.
+        ``self.fill_other`` (n, 2) and ``self.fill_weight`` (n, 2) give the fill's velocity blend
+        afterwards (see :func:`_evaluate`; NO_SHAPE and 0 where there is no fill), and
+        ``self.on_wall`` (n,) marks the filled points between a body and a wall.
         ``self.second_owner`` (n,) and ``self.owner_margin`` (n,) [m] are the nearest other
         owner and how much farther its shapes are (for ``coupling.load_split: shared``).
         """
@@ -385,7 +429,8 @@ class StructureLevelSet:
             raise ValueError(f"points x: shape {x.shape}, expected (n, 3)")
         phi = np.full(x.shape[0], self.cutoff)
         owner = np.full(x.shape[0], NO_SHAPE, np.int64)
-        self.on_wall = np.zeros(x.shape[0], bool)
+        self.fill_other = np.full((x.shape[0], 2), NO_SHAPE, np.int64)
+        self.fill_weight = np.zeros((x.shape[0], 2))
         self.second_owner = np.full(x.shape[0], NO_SHAPE, np.int64)
         self.owner_margin = np.full(x.shape[0], self.cutoff)
         self.pair_tests = self.bin_entries = 0
@@ -397,7 +442,7 @@ class StructureLevelSet:
         start, items = _bin_shapes(centre, self._reach, lo, dims, cell)
         self.pair_tests = _evaluate(x, s.kind, s.body, s.half, self._radius, centre, R, self.cutoff,
                                     lo, dims, cell, start, items, self.walls, self.gap, phi, owner,
-                                    self.on_wall, self.second_owner, self.owner_margin)
+                                    self.fill_other, self.fill_weight, self.second_owner, self.owner_margin)
         self.bin_entries = items.shape[0]
         return phi, owner
 
@@ -423,9 +468,10 @@ def _box_distance_reference(p: np.ndarray, half: np.ndarray) -> np.ndarray:
 
 
 def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: float, gap: float = 0.0,
-                              walls=None, on_wall=None):
+                              walls=None, fill=None):
     """Brute-force NumPy reference of :meth:`StructureLevelSet.evaluate` (all points × all
-    primitives, and the gap fill from the per-owner minima). Each primitive reduces to a box in its symmetry coordinates: a sphere is the
+    primitives, and the gap fill from the per-owner minima; ``fill`` = (fill_other,
+    fill_weight) arrays (n, 2) to receive the fill's velocity blend). Each primitive reduces to a box in its symmetry coordinates: a sphere is the
     interval |ρ₃| ≤ r in the distance ρ₃ from its centre, a cylinder the rectangle
     |ρ| ≤ r, |z| ≤ h/2 in (radial distance, axial coordinate)."""
     x = np.asarray(x, np.float64)
@@ -453,28 +499,41 @@ def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: fl
     phi[near] = np.maximum(dmin[near], -cutoff)
     owner[near] = shapes.body[arg[near]]
     if gap > 0:
-        _gap_fill_reference(x, d, shapes.body, _unit_planes(walls), cutoff, gap, near, phi, owner,
-                            np.zeros(len(x), bool) if on_wall is None else on_wall)
+        if fill is None:
+            fill = np.full(len(x), NO_SHAPE, np.int64), np.zeros(len(x))
+        _gap_fill_reference(x, d, shapes.body, _unit_planes(walls), cutoff, gap, near, phi, owner, *fill)
     return phi, owner
 
 
-def _gap_fill_reference(x, d, body, planes, cutoff, gap, near, phi, owner, on_wall):
-    """φ = min(φ, (d₁ + d₂ − gap)/2) over the two nearest distinct owners (walls = one owner)."""
+def _gap_fill_reference(x, d, body, planes, cutoff, gap, near, phi, owner, fill_other, fill_weight):
+    """φ = min(φ, (d₁ + d₂ − gap)/2) over the two nearest distinct owners (walls = one owner);
+    the fill's velocity weights of the nearest three as :func:`_fill_weights`."""
     owners = np.unique(body)
     per_owner = np.stack([d[:, body == o].min(axis=1) for o in owners], axis=1)
     if len(planes):
         wall = np.einsum("npk,pk->np", x[:, None, :] - planes[None, :, :3], planes[:, 3:]).min(axis=1)
         per_owner = np.column_stack([per_owner, wall])
         owners = np.append(owners, WALL)
-    per_owner = np.minimum(per_owner, cutoff)
     if per_owner.shape[1] < 2:
         return
-    order = np.argsort(per_owner, axis=1, kind="stable")
-    rows = np.arange(len(x))
-    d1, d2 = per_owner[rows, order[:, 0]], per_owner[rows, order[:, 1]]
-    o1, o2 = owners[order[:, 0]], owners[order[:, 1]]
+    absent = np.full((len(x), 1), cutoff)                  # a third owner that is not there
+    per_owner = np.column_stack([np.minimum(per_owner, cutoff), absent])
+    owners = np.append(owners, NO_SHAPE)
+    order = np.argsort(per_owner, axis=1, kind="stable")[:, :3]
+    dk = np.take_along_axis(per_owner, order, axis=1)       # (n, 3) nearest three, ascending
+    ok = owners[order]
+    ok[dk >= cutoff] = NO_SHAPE
+    d1, d2 = dk[:, 0], dk[:, 1]
     fill = 0.5 * (d1 + d2 - gap)
     use = near & (d2 < cutoff) & (fill < phi)
     phi[use] = np.maximum(fill[use], -cutoff)
-    owner[use] = np.where(o1 == WALL, o2, o1)[use]
-    on_wall[use] = ((o1 == WALL) | (o2 == WALL))[use]
+    dk[:, 2] = np.where(ok[:, 2] == NO_SHAPE, cutoff + gap, dk[:, 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = np.maximum(1.0 - (dk - d1[:, None]) / gap, 0.0) / dk
+        w = np.where(d1[:, None] > 0, p / p.sum(axis=1, keepdims=True), [1.0, 0.0, 0.0])
+    wall_nearer = ok[:, 0] == WALL
+    owner[use] = np.where(wall_nearer, ok[:, 1], ok[:, 0])[use]
+    fill_other[use, 0] = np.where(wall_nearer, WALL, ok[:, 1])[use]
+    fill_weight[use, 0] = np.where(wall_nearer, w[:, 0], w[:, 1])[use]
+    fill_other[use, 1] = ok[use, 2]
+    fill_weight[use, 1] = w[use, 2]

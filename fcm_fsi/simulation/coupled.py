@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 import ufl
-from dolfinx import fem
+from dolfinx import fem, la
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -50,7 +50,8 @@ from ..coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thick
                                  shapes_of_blocks)
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain
-from ..fcm.levelset import StructureLevelSet
+from ..fcm.levelset import NO_SHAPE, StructureLevelSet
+from ..fcm.pockets import PocketVents
 from ..fluid.solvers import LinearSolveError
 from ..io.logging import get_logger
 from ..io.timing import StageTimer
@@ -117,6 +118,13 @@ class CoupledModel:
                                           walls=gap_walls(case.dem, self.gdim))
         self.points = np.zeros((self.cut.nodes.shape[0], 3))
         self.points[:, : self.gdim] = self.cut.nodes[:, : self.gdim]
+        self.vents = None
+        if self.gap > 0 and cp.vent_pockets:
+            imap, dofs = self.cut.S1.dofmap.index_map, self.cut.level_dofs
+            self.vents = PocketVents(comm, self.cut.geom_cells, imap.local_to_global(dofs.astype(np.int32)),
+                                     dofs < imap.size_local)
+            self._plain_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band)
+            self._node_flags = fem.Function(self.cut.S1)
         self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
         nv = self.ns.V.dofmap.index_map.size_local + self.ns.V.dofmap.index_map.num_ghosts
         self.v_fluid = np.ones(nv, bool)
@@ -139,8 +147,8 @@ class CoupledModel:
         self.output_functions = list(self.fluid.output_functions) + [self.cut.level_set]
         self.series_units = {**self.fluid.series_units, "cut_cells": "-", "min_cut_fraction": "-",
                              "dem_substeps": "-", "dem_dt_margin": "-", "exchange_error": "-", "retried_steps": "-",
-                             "coupling_iterations": "-", "coupling_residual": "-",
-                             "force_x": "N", "force_y": "N", "force_z": "N"}
+                             "coupling_iterations": "-", "coupling_residual": "-", "pocket_nodes": "-",
+                             "vented_nodes": "-", "force_x": "N", "force_y": "N", "force_z": "N"}
         for b in range(min(self.nb, SERIES_BLOCKS)):
             for key, unit in (("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"),
                               ("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s")):
@@ -359,12 +367,17 @@ class CoupledModel:
         unknown of :meth:`_block_velocities`)."""
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
+        if self.vents is not None:
+            self._vent_pockets(level, owner)
         motion = self._wall_motion(velocities)
         ubar = self._rigid_velocity(self.points, owner, motion)
         share = None
         if self.case.coupling.load_split == "shared":
             share = self._shared_ownership(owner, motion, ubar)
-        ubar[self.levelset.on_wall] = 0.0      # the gap fill between a block and a wall rests with the wall
+        fill = self.levelset.fill_other[:, 0] != NO_SHAPE     # the gap fill: its own blend (continuous ū)
+        if fill.any():
+            ubar[fill] = self._rigid_velocity(self.points[fill], owner[fill], motion,
+                                              self.levelset.fill_other[fill], self.levelset.fill_weight[fill])
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         stats = self.cut.update(level, owner, ubar, share)
@@ -374,6 +387,39 @@ class CoupledModel:
             # the volume correction holds the liquid of the fluid part
             self.fluid.pf.interface_cell_weights = self.cut.fluid_fractions()
         return stats
+
+    def _vent_pockets(self, level: np.ndarray, owner: np.ndarray) -> None:
+        """``coupling.vent_pockets``: remove the gap fill (in place: level, owner and the fill's
+        velocity blend get the plain level set's) where it seals fluid pockets, between owners
+        free to part (fcm/pockets.py). The plain level set is evaluated only when there is a pocket."""
+        st, ls = self.system.state, self.levelset
+        plain = {}
+
+        def plain_level():
+            if not plain:
+                plain["level"], plain["owner"] = self._plain_levelset.evaluate(self.points, st.pos, st.quat)
+            return plain["level"]
+
+        other = ls.fill_other[:, 0]
+        cluster = self._bonded_labels()
+        bonded = (owner >= 0) & (other >= 0)
+        bonded[bonded] = cluster[owner[bonded]] == cluster[other[bonded]]
+        free = np.append(~st.fixed, False)          # moving blocks; index −1: static, wall, none
+        moving = free[np.where(owner >= 0, owner, -1)] | free[np.where(other >= 0, other, -1)]
+        reverted = self.vents.vent(level, plain_level, moving & ~bonded, self._any_rank)
+        if reverted.any():
+            owner[reverted] = plain["owner"][reverted]
+            ls.fill_other[reverted] = NO_SHAPE
+            ls.fill_weight[reverted] = 0.0
+
+    def _any_rank(self, flags: np.ndarray) -> np.ndarray:
+        """Per-node flags (mesh vertex order) or-ed over the ranks that hold each node."""
+        x = self._node_flags.x
+        x.array[:] = 0.0
+        x.array[self.cut.level_dofs] = flags
+        x.scatter_reverse(la.ScatterMode.add)
+        x.scatter_forward()
+        return x.array[self.cut.level_dofs] > 0
 
     def _shared_ownership(self, owner: np.ndarray, motion, ubar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``coupling.load_split: shared``: at each node the nearest other block (second owner)
@@ -385,8 +431,7 @@ class CoupledModel:
         w = np.where((second >= 0) & (owner >= 0), w, 0.0)
         blend = w > 0
         if blend.any():
-            u2 = self._rigid_velocity(self.points[blend], second[blend], motion)
-            ubar[blend] = (1.0 - w[blend, None]) * ubar[blend] + w[blend, None] * u2
+            ubar[blend] = self._rigid_velocity(self.points[blend], owner[blend], motion, second[blend], w[blend])
         return second, w
 
     def _wall_motion(self, velocities=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -410,7 +455,11 @@ class CoupledModel:
     def _cluster_labels(self) -> np.ndarray:
         """(nb,) label of each block's cluster: blocks joined by intact bonds (each block its
         own without ``wall_motion: bonded_cluster``)."""
-        if not self._by_cluster():
+        return self._bonded_labels() if self._by_cluster() else np.arange(self.nb)
+
+    def _bonded_labels(self) -> np.ndarray:
+        """(nb,) label of each block's bonded cluster: blocks joined by intact bonds."""
+        if self.bonds is None:
             return np.arange(self.nb)
         from ..coupling.dem_side import bonded_clusters
         first = np.unique(self.bonds.pt_bond, return_index=True)[1]      # one point per bond
@@ -426,11 +475,14 @@ class CoupledModel:
         inertia_world = np.einsum("bij,bj,bkj->bik", R, self.inertia0, R)
         return cluster_rigid_motion(X, V, W, self.mass0, inertia_world, self._cluster_labels(), st.fixed)
 
-    def _rigid_velocity(self, points: np.ndarray, owner: np.ndarray, motion) -> np.ndarray:
+    def _rigid_velocity(self, points: np.ndarray, owner: np.ndarray, motion, other=None, weight=None) -> np.ndarray:
         """Wall velocity (n, gdim) [m/s] at ``points`` of the blocks ``owner`` (0 where < 0) from
-        the per-block rigid ``motion`` (X, V, Ω) of :meth:`_wall_motion`."""
-        from ..coupling.dem_side import rigid_body_velocity
-        return rigid_body_velocity(*motion, points, owner)[:, : self.gdim]
+        the per-block rigid ``motion`` (X, V, Ω) of :meth:`_wall_motion`; with ``other`` and
+        ``weight`` w, (1 − w) times it plus w times that of the blocks ``other``."""
+        from ..coupling.dem_side import blended_rigid_velocity, rigid_body_velocity
+        if other is None:
+            return rigid_body_velocity(*motion, points, owner)[:, : self.gdim]
+        return blended_rigid_velocity(*motion, points, owner, other, weight)[:, : self.gdim]
 
     def fluid_part_density(self, rho, rho_cell) -> None:
         """Cell-mean ρ of the PSPG test function over the cell's (weighted) fluid part, not
@@ -686,7 +738,9 @@ class CoupledModel:
                      "dem_substeps": float(ex.n_sub if ex else 0), "dem_dt_margin": float(ex.dt_over_dt_cr if ex else 0),
                      "exchange_error": self.exchange_error, "retried_steps": float(self.retried),
                      "coupling_iterations": float(self.iterations_done),
-                     "coupling_residual": self.iteration_residual})
+                     "coupling_residual": self.iteration_residual,
+                     "pocket_nodes": float(self.vents.pocket_nodes if self.vents else 0),
+                     "vented_nodes": float(self.vents.vented_nodes if self.vents else 0)})
         total = self.force.sum(axis=0)
         diag.update({"force_x": total[0], "force_y": total[1], "force_z": total[2]})
         for b in range(min(self.nb, SERIES_BLOCKS)):

@@ -1,0 +1,128 @@
+"""Fluid pockets that the gap fill seals off, and the vents that reopen them (issue #8).
+
+The gap fill (``levelset._evaluate``) counts fluid gaps narrower than δ ≈ one cell as solid.
+Where a block lands on a floor beside a fixed stopper it closes the last gap to the floor
+while the corner is still ≈ δ above it, and seals the water between block, stopper and floor
+into a pocket of its own. That pocket is incompressible and has no outlet, so the block's
+further descent meets an infinitely stiff cushion: in block_overturn (30°, full level) a
+784 mm² pocket sealed at ≈ 0.913 s and the next steps gave the 10 N block kicks of ±5 kN
+(docs/coupling.md, session 23). In the real gap the water drains until the surfaces touch.
+
+:class:`PocketVents` finds the connected components of the fluid nodes (over the mesh cells,
+across MPI ranks) and, while some component other than the largest exists, gives the nodes
+of the cells touching it that only the fill made solid their plain level set back — layer by
+layer until the pocket reaches the rest of the fluid again — but only fill between owners
+that are free to part: one of them a moving block, the other a wall, a static shape, a fixed
+block or a block of another bonded cluster. The fill between the blocks of a bonded structure
+is its mortar and stays (an enclosed room of a standing building remains a pocket), and so
+does the fill between two owners that cannot move (a fixed stopper on the floor).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+from scipy.sparse.csgraph import connected_components
+
+
+def fluid_components(cells: np.ndarray, fluid: np.ndarray) -> np.ndarray:
+    """Component label (n,) of every node (−1 where not ``fluid``): nodes are joined when a
+    cell (rows of node indices) holds both and both are fluid."""
+    n = len(fluid)
+    ok = fluid[cells]
+    rows, cols = [], []
+    for a in range(cells.shape[1]):
+        for b in range(a + 1, cells.shape[1]):
+            both = ok[:, a] & ok[:, b]
+            rows.append(cells[both, a])
+            cols.append(cells[both, b])
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    graph = sp.coo_matrix((np.ones(len(r), np.int8), (r, c)), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    return np.where(fluid, label, -1)
+
+
+def _roots(parent: np.ndarray) -> np.ndarray:
+    """Root of every entry of a union-find forest (``parent`` of roots is themselves)."""
+    root = parent.copy()
+    while True:
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            return root
+        root = nxt
+
+
+class PocketVents:
+    """Fluid components across ranks and the vents of :mod:`pockets` (module docstring).
+
+    ``cells`` (nc, nv) local node indices of this rank's cells (owned and ghost), ``global_ids``
+    (n,) the global index of every local node, ``owned`` (n,) bool the nodes this rank owns.
+    """
+
+    def __init__(self, comm: MPI.Comm, cells: np.ndarray, global_ids: np.ndarray, owned: np.ndarray,
+                 max_passes: int = 20):
+        self.comm, self.cells = comm, np.asarray(cells, np.int64)
+        self.global_ids, self.owned = np.asarray(global_ids, np.int64), np.asarray(owned, bool)
+        self.max_passes = int(max_passes)
+        self._order = np.argsort(self.global_ids)
+        self._sorted_ids = self.global_ids[self._order]
+        self.pocket_nodes = 0          # owned fluid nodes outside the largest component (last check)
+        self.vented_nodes = 0          # owned nodes whose fill was removed (last call)
+
+    def components(self, fluid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Global component id (n,) of every fluid node (−1 elsewhere), the same on every rank
+        that holds the node, and the owned node count (ncomp,) of each id (collective)."""
+        local = fluid_components(self.cells, fluid)
+        nloc = int(local.max(initial=-1)) + 1
+        offset = self.comm.exscan(nloc) or 0
+        total = self.comm.allreduce(nloc)
+        gid = np.where(local >= 0, local + offset, -1)
+        # join the ids that meet at a node held by several ranks: each ghost's id with its owner's
+        shared = fluid & ~self.owned
+        pairs = []
+        for g_nodes, g_ids in self.comm.allgather((self.global_ids[shared], gid[shared])):
+            k = np.minimum(np.searchsorted(self._sorted_ids, g_nodes), len(self._sorted_ids) - 1)
+            i = self._order[k]
+            mine = (self.global_ids[i] == g_nodes) & self.owned[i] & (gid[i] >= 0)
+            pairs.append(np.column_stack([g_ids[mine], gid[i[mine]]]))
+        pairs = np.unique(np.concatenate(pairs + [np.zeros((0, 2), np.int64)]), axis=0)
+        pairs = np.unique(np.concatenate(self.comm.allgather(pairs)), axis=0)
+        parent = np.arange(total)
+        for a, b in pairs.tolist():
+            ra, rb = _roots(parent)[[a, b]]
+            parent[max(ra, rb)] = min(ra, rb)
+        root = _roots(parent)
+        label = np.where(gid >= 0, root[np.maximum(gid, 0)], -1)
+        size = np.bincount(label[self.owned & (label >= 0)], minlength=total)
+        return label, self.comm.allreduce(size)
+
+    def vent(self, level: np.ndarray, plain_level, ventable: np.ndarray, combine) -> np.ndarray:
+        """Remove the fill where it seals fluid pockets: ``level`` (n,) the level set with the fill
+        (changed in place), ``plain_level()`` the level set without it (called only if some fill
+        next to a pocket may go), ``ventable`` (n,) bool where the fill may go (between owners
+        free to part). Only nodes that the fill made solid (level ≤ 0 < plain) and that share a cell with the pocket
+        go back to the plain level set, so the fill is opened no wider than needed;
+        ``combine(flags)`` makes per-node flags agree across ranks (logical or over the ranks
+        holding a node). Returns the nodes reverted to the plain level set (collective)."""
+        reverted = np.zeros(len(level), bool)
+        self.pocket_nodes = 0
+        for _ in range(self.max_passes):
+            label, size = self.components(level > 0)
+            if np.count_nonzero(size) <= 1:
+                break
+            pocket = (label >= 0) & (label != int(np.argmax(size)))
+            if not self.pocket_nodes:
+                self.pocket_nodes = int(size.sum() - size.max())
+            touching = np.zeros(len(level), bool)
+            touching[self.cells[pocket[self.cells].any(axis=1)].ravel()] = True
+            candidate = touching & ventable & (level <= 0)
+            if not self.comm.allreduce(bool(candidate.any()), op=MPI.LOR):
+                break
+            plain = plain_level()
+            revert = combine(candidate & (plain > 0))
+            if not self.comm.allreduce(bool(revert.any()), op=MPI.LOR):
+                break
+            level[revert] = plain[revert]
+            reverted |= revert
+        self.vented_nodes = self.comm.allreduce(int(np.count_nonzero(reverted & self.owned)))
+        return reverted
