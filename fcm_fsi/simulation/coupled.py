@@ -391,7 +391,8 @@ class CoupledModel:
     def _vent_pockets(self, level: np.ndarray, owner: np.ndarray) -> None:
         """``coupling.vent_pockets``: remove the gap fill (in place: level, owner and the fill's
         velocity blend get the plain level set's) where it seals fluid pockets, between owners
-        free to part (fcm/pockets.py). The plain level set is evaluated only when there is a pocket."""
+        free to part: one a moving block, not both of one bonded cluster (fcm/pockets.py). The
+        plain level set is evaluated only when some fill next to a pocket may go."""
         st, ls = self.system.state, self.levelset
         plain = {}
 
