@@ -108,8 +108,8 @@ def test_gap_fill_closes_a_sub_gap_layer_under_a_block():
     np.testing.assert_allclose(phi[:3], [0.5 * (0.0005 + 0.0005 - 0.005), 0.5 * (0.001 - 0.005),
                                          0.5 * (0.0005 + d_block - 0.005)], atol=1e-15)
     assert np.all(owner[:3] == 0) and phi[3] > 0 and phi[4] > 0
-    # on_wall also marks fluid points where the fill is the nearer surface (ū continuous across it)
-    np.testing.assert_array_equal(ls.on_wall, [True, True, True, True, False])
+    # the wall is the fill's other owner also at fluid points where the fill is the nearer surface
+    np.testing.assert_array_equal(ls.fill_other[:, 0] == WALL, [True, True, True, True, False])
     plain, _ = StructureLevelSet(block, 1, 0.1).evaluate(x, pos, quat)
     assert np.all(plain[:3] > 0) and 0 < phi[3] < plain[3]
 

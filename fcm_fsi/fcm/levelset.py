@@ -404,11 +404,6 @@ class StructureLevelSet:
         self.fill_other, self.fill_weight = np.zeros((0, 2), np.int64), np.zeros((0, 2))
         self.second_owner, self.owner_margin = np.zeros(0, np.int64), np.zeros(0)
 
-    @property
-    def on_wall(self) -> np.ndarray:
-        """(n,) bool: the points of the last :meth:`evaluate` whose gap fill is between a body and a wall."""
-        return self.fill_other[:, 0] == WALL
-
     def evaluate(self, x: np.ndarray, body_pos: np.ndarray, body_quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """φ and owner at the points ``x`` (n, 3) [m] (2D meshes pass z = 0).
 
@@ -417,8 +412,8 @@ class StructureLevelSet:
         to [−cutoff, cutoff], and owner (n,) int64: the body of the primitive attaining the
         minimum (−1 static), −2 where no primitive is closer than the cutoff. With a gap fill,
         ``self.fill_other`` (n, 2) and ``self.fill_weight`` (n, 2) give the fill's velocity blend
-        afterwards (see :func:`_evaluate`; NO_SHAPE and 0 where there is no fill), and
-        ``self.on_wall`` (n,) marks the filled points between a body and a wall.
+        afterwards (see :func:`_evaluate`; NO_SHAPE and 0 where there is no fill; WALL in
+        column 0 marks the filled points between a body and a wall).
         ``self.second_owner`` (n,) and ``self.owner_margin`` (n,) [m] are the nearest other
         owner and how much farther its shapes are (for ``coupling.load_split: shared``).
         """
