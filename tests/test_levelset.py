@@ -80,6 +80,8 @@ def test_gap_fill_kernel_matches_reference(gap):
     plain, _ = signed_distance_reference(x, shapes, pos, quat, cutoff)
     np.testing.assert_allclose(phi, phi_ref, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(owner, owner_ref)
+    no_fill_arrays, _ = signed_distance_reference(x, shapes, pos, quat, cutoff, gap=gap, walls=walls)
+    np.testing.assert_array_equal(no_fill_arrays, phi_ref)       # the blend's arrays are optional
     np.testing.assert_array_equal(ls.fill_other, fill[0])
     np.testing.assert_allclose(ls.fill_weight, fill[1], rtol=0, atol=1e-12)
     blended = (ls.fill_weight > 0) & (ls.fill_weight < 1)

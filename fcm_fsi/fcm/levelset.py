@@ -495,7 +495,7 @@ def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: fl
     owner[near] = shapes.body[arg[near]]
     if gap > 0:
         if fill is None:
-            fill = np.full(len(x), NO_SHAPE, np.int64), np.zeros(len(x))
+            fill = np.full((len(x), 2), NO_SHAPE, np.int64), np.zeros((len(x), 2))
         _gap_fill_reference(x, d, shapes.body, _unit_planes(walls), cutoff, gap, near, phi, owner, *fill)
     return phi, owner
 
