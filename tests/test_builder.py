@@ -289,3 +289,52 @@ def test_a_lateral_load_above_friction_slides_a_loose_frame_but_not_an_anchored_
         assert 0.5 * 0.011 < slide < 2.0 * 0.011
     else:
         assert abs(slide) < 1e-3
+
+
+def test_member_names_follow_the_blocks_and_the_sequence_orders_members_by_first_break(paper):
+    from fcm_fsi.dem.failure_sequence import failure_sequence, member_names
+    cfg, _, s = paper
+    names = member_names(cfg)
+    assert len(names) == s.nb
+    front = [i for i, n in enumerate(names) if n == "wall xmin s0"]
+    back = [i for i, n in enumerate(names) if n == "wall xmax s1"]
+    # every front-wall block lies in the x-min wall of the ground floor, every back one in x-max upstairs
+    assert front and np.allclose(s.pos[front, 0], cfg.origin[0])
+    assert np.all(s.pos[front, 2] < cfg.storey_height)
+    assert back and np.allclose(s.pos[back, 0], cfg.origin[0] + sum(cfg.bays_x))
+    assert np.all(s.pos[back, 2] > cfg.storey_height)
+    mass = {n: s.mass[[i for i, m in enumerate(names) if m == n]].sum() for n in ("wall xmin s0", "wall xmax s0")}
+    assert mass["wall xmin s0"] < mass["wall xmax s0"]   # the door
+    col = names.index("column s0")
+    # two breaks at 1.0 s (front–column, front–front), one at 2.0 s (back–back), one outside
+    # the structure (block 0 is a loose block before it: first_block = 1)
+    t = np.array([2.0, 1.0, 1.0, 3.0])
+    a = np.array([back[0] + 1, front[0] + 1, front[1] + 1, 0])
+    b = np.array([back[1] + 1, col + 1, front[2] + 1, 0])
+    seq = failure_sequence(t, a, b, names, first_block=1)
+    assert [(f.member, f.first_break, f.bonds) for f in seq] == [
+        ("column s0", 1.0, 1), ("wall xmin s0", 1.0, 2), ("wall xmax s1", 2.0, 1), ("block 0", 3.0, 1)]
+
+
+def test_failure_sequence_cli_reads_a_run_folder_and_the_back_wall_rule(tmp_path, capsys):
+    import shutil
+    from fcm_fsi.dem.failure_sequence import MemberFailure, main
+    from fcm_fsi.verify.cases.tsunami import back_wall_after_front
+    shutil.copy(ROOT / "cases" / "tsunami_building.yaml", tmp_path / "case.resolved.yaml")
+    (tmp_path / "bond_breaks.csv").write_text("t [s],bond [-],block_a [-],block_b [-]\n"
+                                              "1.5,3.0,208.0,16.0\n1.25,7.0,32.0,33.0\n")
+    assert main([str(tmp_path)]) == 0
+    rows = [(ln[:18].strip(), float(ln.split()[-3]), int(ln.split()[-1]))
+            for ln in capsys.readouterr().out.splitlines()[1:]]
+    # storey 0 lists its 16 column blocks first, then its walls in the case's order (xmin, xmax,
+    # ...) of 12 blocks each: block 16 is the front wall's first, 32 and 33 the back wall's;
+    # 208 the foundation. Ties in time are ordered by name.
+    assert rows == [("wall xmax s0", 1.25, 1), ("foundation", 1.5, 1), ("wall xmin s0", 1.5, 1)]
+    (tmp_path / "bond_breaks.csv").write_text("t [s],bond [-],block_a [-],block_b [-]\n")
+    assert main([str(tmp_path)]) == 0 and "no bond broke" in capsys.readouterr().out
+    assert main([str(tmp_path / "nowhere")]) == 2 and "case.resolved.yaml" in capsys.readouterr().err
+    seq = lambda *mt: [MemberFailure(m, t, 1, t) for m, t in mt]
+    assert back_wall_after_front(seq(("wall xmin s0", 1.0), ("wall xmax s0", 2.0))) == 1.0
+    assert back_wall_after_front(seq(("wall xmax s1", 0.5), ("wall xmin s0", 1.0))) == 0.0
+    assert back_wall_after_front(seq(("wall xmin s0", 1.0), ("column s0", 2.0))) == 0.0
+    assert np.isnan(back_wall_after_front(seq(("wall xmax s0", 1.0))))

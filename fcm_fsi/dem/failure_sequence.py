@@ -1,0 +1,125 @@
+"""The failure sequence of a bonded building: which member broke first, which next.
+
+A run with bonded blocks writes ``bond_breaks.csv`` (time, bond, its two blocks for every bond
+that breaks). This module names every block of a ``dem.structure`` building by its member —
+``wall xmin s0`` is the ground-floor wall on the x-min side (the tsunami's front wall: the
+water comes from −x), ``column s1`` a first-floor column, ``slab s0`` the first floor,
+``foundation`` — and orders the members by the time of their first broken bond::
+
+    python -m fcm_fsi.dem.failure_sequence OUTPUT_DIR      # reads case.resolved.yaml and bond_breaks.csv
+
+A bond joining two members counts for both (a wall torn off its column fails both). The
+structure's blocks are the last of the case's blocks (before them: ``dem.blocks``, then the
+generators), the foundation last of all.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..config.loader import ConfigError
+from ..config.structure import StructureConfig
+from .builder import KINDS, building_boxes
+
+
+@dataclass(frozen=True)
+class MemberFailure:
+    member: str
+    first_break: float      # time of the member's first broken bond [s]
+    bonds: int              # bonds of the member broken by the end of the record
+    last_break: float       # time of its last broken bond [s]
+
+
+def member_names(cfg: StructureConfig) -> list[str]:
+    """The member of every block of ``build_building(cfg)``, in its block order."""
+    lo, hi, kind, storey = building_boxes(cfg)
+    ox, oy, _ = cfg.origin
+    lines = {"xmin": (0, ox), "xmax": (0, ox + sum(cfg.bays_x)),
+             "ymin": (1, oy), "ymax": (1, oy + sum(cfg.bays_y))}
+    centre = 0.5 * (lo + hi)
+    names = []
+    for c, k, s in zip(centre, kind, storey):
+        name = KINDS[k]
+        if name == "wall":     # a wall block is centred on its side's grid line across its thickness
+            side = min(lines, key=lambda n: abs(c[lines[n][0]] - lines[n][1]))
+            name = f"wall {side}"
+        names.append("foundation" if name == "foundation" else f"{name} s{s}")
+    return names
+
+
+def failure_sequence(t: np.ndarray, block_a: np.ndarray, block_b: np.ndarray,
+                     names: list[str], first_block: int = 0) -> list[MemberFailure]:
+    """Members in the order of their first broken bond (ties: by name). ``t``, ``block_a``,
+    ``block_b`` are the columns of ``bond_breaks.csv``; ``names[i]`` is the member of block
+    ``first_block + i``; a block outside the structure is named ``block N``."""
+    def name(k: int) -> str:
+        i = int(k) - first_block
+        return names[i] if 0 <= i < len(names) else f"block {int(k)}"
+
+    seen: dict[str, list[float]] = {}
+    for ti, a, b in zip(np.asarray(t, float), block_a, block_b):
+        for m in {name(a), name(b)}:
+            seen.setdefault(m, []).append(float(ti))
+    out = [MemberFailure(m, min(ts), len(ts), max(ts)) for m, ts in seen.items()]
+    return sorted(out, key=lambda f: (f.first_break, f.member))
+
+
+def read_breaks(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, block_a, block_b) of a ``bond_breaks.csv`` (empty arrays when no bond broke)."""
+    path = Path(path)
+    if not path.exists():
+        raise ConfigError(f"{path}: not found (a run with bonded blocks writes it)")
+    lines = path.read_text().splitlines()
+    if len(lines) < 2:
+        return np.zeros(0), np.zeros(0, int), np.zeros(0, int)
+    head = [h.split(" ")[0] for h in lines[0].split(",")]
+    rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:] if ln.strip()], ndmin=2)
+    col = {h: rows[:, i] for i, h in enumerate(head)}
+    try:
+        return col["t"], col["block_a"].astype(int), col["block_b"].astype(int)
+    except KeyError as err:
+        raise ConfigError(f"{path}: no column {err} (expected t, bond, block_a, block_b)") from None
+
+
+def sequence_of_run(out_dir: Path, case=None) -> list[MemberFailure]:
+    """The failure sequence of the run in ``out_dir`` from its bond_breaks.csv; ``case`` (a
+    loaded case) defaults to the run's case.resolved.yaml."""
+    from ..config import load_case
+    out_dir = Path(out_dir)
+    if case is None:
+        case = load_case(out_dir / "case.resolved.yaml")
+    if case.dem is None or case.dem.structure is None:
+        raise ConfigError(f"{out_dir}: the run's case has no dem.structure (no building to name)")
+    names = member_names(case.dem.structure)
+    first = _blocks_before_structure(case.dem)
+    return failure_sequence(*read_breaks(out_dir / "bond_breaks.csv"), names, first)
+
+
+def _blocks_before_structure(dem) -> int:
+    return len(dem.blocks) + sum(g.count for g in dem.generators)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.dem.failure_sequence", description=__doc__.split("\n\n")[0])
+    ap.add_argument("output", type=Path, help="a run's output folder")
+    args = ap.parse_args(argv)
+    try:
+        seq = sequence_of_run(args.output)
+    except ConfigError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    if not seq:
+        print("no bond broke")
+        return 0
+    print("member            first break [s]  last break [s]  bonds broken")
+    for f in seq:
+        print(f"{f.member:18s} {f.first_break:14.4f} {f.last_break:15.4f} {f.bonds:13d}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
