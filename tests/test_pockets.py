@@ -50,15 +50,16 @@ def test_components_of_a_sealed_ring_and_its_slot():
     assert len(np.unique(fluid_components(cells, plain > 0)[plain > 0])) == 1
 
 
-def _vents(cells, n):
-    return PocketVents(MPI.COMM_SELF, cells, np.arange(n), np.ones(n, bool))
+def _vents(p, cells, **kw):
+    n = len(p)
+    return PocketVents(MPI.COMM_SELF, cells, np.arange(n), np.ones(n, bool), p[cells], **kw)
 
 
 def test_vent_removes_the_fill_that_seals_a_pocket_and_only_there():
     p, cells = grid(40)
     plain, filled = ring_with_slot(p)
     level = filled.copy()
-    vents = _vents(cells, len(p))
+    vents = _vents(p, cells)
     reverted = vents.vent(level, lambda: plain, np.ones(len(p), bool), lambda f: f)
     inside = np.hypot(p[:, 0] - C[0], p[:, 1] - C[1]) < 0.2
     assert vents.pocket_nodes == np.count_nonzero(filled[inside] > 0) > 100
@@ -72,7 +73,7 @@ def test_vent_removes_the_fill_that_seals_a_pocket_and_only_there():
 def test_bonded_fill_stays_and_a_pocket_without_fill_stays():
     p, cells = grid(40)
     plain, filled = ring_with_slot(p)
-    vents = _vents(cells, len(p))
+    vents = _vents(p, cells)
     level = filled.copy()
     assert not vents.vent(level, lambda: plain, np.zeros(len(p), bool), lambda f: f).any()   # mortar
     assert np.array_equal(level, filled) and vents.pocket_nodes > 100
@@ -83,19 +84,21 @@ def test_bonded_fill_stays_and_a_pocket_without_fill_stays():
                           lambda f: f).any() and vents.pocket_nodes == 0
 
 
-def test_a_pocket_no_deeper_than_min_depth_stays():
-    """A sliver pocket (every node within ``min_depth`` of a surface) is a gap the fill width does
-    not resolve: it is counted, not vented; a deeper one with the same fill is vented."""
+def test_a_pocket_holding_less_than_min_volume_stays():
+    """A sliver pocket (less fluid than ``min_volume``) is below what the mesh resolves: it is
+    counted, not vented; the same pocket is vented when the bound is below its volume, and
+    the default bound is half the smallest cell."""
     p, cells = grid(40)
     plain, filled = ring_with_slot(p)
-    deepest = filled[np.hypot(p[:, 0] - C[0], p[:, 1] - C[1]) < 0.2].max()      # ≈ 0.2
+    inside = np.pi * 0.2 ** 2           # the pocket: the disc r < 0.2 inside the ring
     level = filled.copy()
-    vents = PocketVents(MPI.COMM_SELF, cells, np.arange(len(p)), np.ones(len(p), bool), min_depth=deepest)
+    vents = _vents(p, cells, min_volume=1.02 * inside)
     assert not vents.vent(level, lambda: plain, np.ones(len(p), bool), lambda f: f).any()
     assert np.array_equal(level, filled) and vents.pocket_nodes > 100 and vents.vented_nodes == 0
-    vents = PocketVents(MPI.COMM_SELF, cells, np.arange(len(p)), np.ones(len(p), bool), min_depth=0.99 * deepest)
+    vents = _vents(p, cells, min_volume=0.98 * inside)
     assert vents.vent(level, lambda: plain, np.ones(len(p), bool), lambda f: f).any()
     assert len(np.unique(fluid_components(cells, level > 0)[level > 0])) == 1
+    assert _vents(p, cells).min_volume == pytest.approx(0.5 * 0.5 / 40 ** 2)
 
 
 MPI_SCRIPT = r"""
@@ -113,9 +116,11 @@ p = S.tabulate_dof_coordinates()[:n]
 from tests.test_pockets import ring_with_slot
 plain, filled = ring_with_slot(p)
 owned = np.arange(n) < imap.size_local
-# the pocket's deepest nodes (level ≈ 0.2 at the centre, above 0.15 only within 0.05 of it) lie on
-# one rank at most: the others learn that it is deep enough to vent from the reduction
-vents = PocketVents(comm, cells, imap.local_to_global(np.arange(n, dtype=np.int32)), owned, min_depth=0.15)
+# a bound of 0.9 x the pocket's volume: no rank holds enough of it alone (on 2 ranks), so the
+# vent needs the summed volume
+coords = p[cells][:, :, :2]
+vents = PocketVents(comm, cells, imap.local_to_global(np.arange(n, dtype=np.int32)), owned, coords,
+                    m.topology.index_map(2).size_local, min_volume=0.9 * np.pi * 0.2 ** 2)
 f = fem.Function(S)
 def any_rank(flags):
     f.x.array[:] = 0.0
