@@ -17,16 +17,6 @@ block or a block of another bonded cluster. The fill between the blocks of a bon
 is its mortar and stays (an enclosed room of a standing building remains a pocket), and so
 does the fill between two owners that cannot move (a fixed stopper on the floor).
 
-Only a gap that is closing (or holds still) is opened: the fill of a gap whose two surfaces
-move apart stays. A closing pocket must drain, and without an outlet it is an infinitely stiff
-cushion; an opening one fills, in the real flow, from where the gap is widest, and a vent
-there makes a sub-cell throat through which the flow cannot follow the opening: in
-block_overturn (30°, full level) the vent of a pocket beside the stopper under the tipping
-block's lifting edge removed the fill between that edge and the floor, and the wedge pulled
-the 10 N block down with 300–440 N for as long as it was open (0.770–0.775 s; without vents
-< 5 N). Whether a gap opens is read from the filled level set at the node, evaluated again at
-the poses the blocks' velocities give a short time τ later: it opens where that is larger.
-
 A pocket holding less fluid than half the smallest cell is below what the mesh resolves and
 is left as it is (counted in ``pocket_nodes``, not vented). Venting such a sliver opened more
 than it closed: in block_overturn (30°, full level) at 0.751 s a single node 7 µm inside the
@@ -129,7 +119,7 @@ class PocketVents:
         size = np.bincount(label[self.owned & (label >= 0)], minlength=total)
         return label, self.comm.allreduce(size)
 
-    def vent(self, level: np.ndarray, plain_level, ventable: np.ndarray, combine, opening=None) -> np.ndarray:
+    def vent(self, level: np.ndarray, plain_level, ventable: np.ndarray, combine) -> np.ndarray:
         """Remove the fill where it seals fluid pockets: ``level`` (n,) the level set with the fill
         (changed in place), ``plain_level()`` the level set without it (called only if some fill
         next to a pocket may go), ``ventable`` (n,) bool where the fill may go (between owners
@@ -137,9 +127,7 @@ class PocketVents:
         go back to the plain level set, so the fill is opened no wider than needed; pockets holding
         no more fluid than ``min_volume`` are not vented;
         ``combine(flags)`` makes per-node flags agree across ranks (logical or over the ranks
-        holding a node); ``opening(mask)``, when given, is True at the nodes of ``mask`` whose fill
-        gap is opening — that fill stays (module docstring). Returns the nodes reverted to the
-        plain level set (collective)."""
+        holding a node). Returns the nodes reverted to the plain level set (collective)."""
         reverted = np.zeros(len(level), bool)
         self.pocket_nodes = 0
         for _ in range(self.max_passes):
@@ -158,8 +146,6 @@ class PocketVents:
             touching = np.zeros(len(level), bool)
             touching[self.cells[pocket[self.cells].any(axis=1)].ravel()] = True
             candidate = touching & ventable & (level <= 0)
-            if opening is not None and candidate.any():
-                candidate &= ~opening(candidate)
             if not self.comm.allreduce(bool(candidate.any()), op=MPI.LOR):
                 break
             plain = plain_level()
@@ -184,27 +170,3 @@ class PocketVents:
             np.add.at(volume, label[cells[touch]].max(axis=1), inside)
         self.comm.Allreduce(MPI.IN_PLACE, volume, op=MPI.SUM)
         return volume
-
-
-def advanced_poses(pos: np.ndarray, quat: np.ndarray, vel: np.ndarray, omega: np.ndarray, tau: float,
-                   fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Block poses a time ``tau`` [s] on at constant velocity and world-frame spin, fixed blocks
-    where they are: x + τ v, and the unit quaternion of q + ½ τ (0, ω) ⊗ q."""
-    pos2, q2 = pos.copy(), quat.copy()
-    m = ~np.asarray(fixed, bool)
-    w, v, om = quat[m, :1], quat[m, 1:], omega[m]
-    pos2[m] += tau * vel[m]
-    q = np.concatenate([w - 0.5 * tau * np.sum(om * v, axis=1, keepdims=True),
-                        v + 0.5 * tau * (om * w + np.cross(om, v))], axis=1)
-    q2[m] = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return pos2, q2
-
-
-def fill_gap_opening(levelset, x: np.ndarray, pos: np.ndarray, quat: np.ndarray, vel: np.ndarray,
-                     omega: np.ndarray, fixed: np.ndarray, tau: float) -> np.ndarray:
-    """True at the points ``x`` (m, 3) where the filled level set of ``levelset`` (a
-    :class:`~fcm_fsi.fcm.levelset.StructureLevelSet` with a gap; its fill arrays are
-    overwritten) grows when the blocks move on rigidly for ``tau``: where the fill's gap opens."""
-    now, _ = levelset.evaluate(x, pos, quat)
-    later, _ = levelset.evaluate(x, *advanced_poses(pos, quat, vel, omega, tau, fixed))
-    return later > now

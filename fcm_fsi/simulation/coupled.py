@@ -51,7 +51,7 @@ from ..coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thick
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain
 from ..fcm.levelset import NO_SHAPE, StructureLevelSet
-from ..fcm.pockets import PocketVents, fill_gap_opening
+from ..fcm.pockets import PocketVents
 from ..fluid.solvers import LinearSolveError
 from ..io.logging import get_logger
 from ..io.timing import StageTimer
@@ -124,10 +124,6 @@ class CoupledModel:
             self.vents = PocketVents(comm, self.cut.geom_cells, imap.local_to_global(dofs.astype(np.int32)),
                                      dofs < imap.size_local, self.cut.cell_coords, self.cut.n_owned)
             self._plain_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band)
-            # the filled level set again, at a few nodes (whether a fill gap opens): its own
-            # instance, so the main one keeps this rebuild's fill arrays
-            self._probe_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band, gap=self.gap,
-                                                     walls=gap_walls(case.dem, self.gdim))
             self._node_flags = fem.Function(self.cut.S1)
         self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
         nv = self.ns.V.dofmap.index_map.size_local + self.ns.V.dofmap.index_map.num_ghosts
@@ -411,24 +407,11 @@ class CoupledModel:
         bonded[bonded] = cluster[owner[bonded]] == cluster[other[bonded]]
         free = np.append(~st.fixed, False)          # moving blocks; index −1: static, wall, none
         moving = free[np.where(owner >= 0, owner, -1)] | free[np.where(other >= 0, other, -1)]
-        reverted = self.vents.vent(level, plain_level, moving & ~bonded, self._any_rank, self._fill_gap_opening)
+        reverted = self.vents.vent(level, plain_level, moving & ~bonded, self._any_rank)
         if reverted.any():
             owner[reverted] = plain["owner"][reverted]
             ls.fill_other[reverted] = NO_SHAPE
             ls.fill_weight[reverted] = 0.0
-
-    def _fill_gap_opening(self, mask: np.ndarray) -> np.ndarray:
-        """True at the nodes of ``mask`` where the filled level set grows when every block moves on
-        rigidly for τ (its DEM velocity and spin): the gap the fill closes there is opening. τ
-        moves the fastest surface point by 1 % of the smallest cell."""
-        st = self.system.state
-        moving = ~st.fixed
-        speed = np.linalg.norm(st.vel[moving], axis=1) + np.linalg.norm(st.omega[moving], axis=1) * self.band
-        tau = 0.01 * self.h_min / max(float(speed.max(initial=0.0)), 1e-12)
-        out = np.zeros(len(mask), bool)
-        out[mask] = fill_gap_opening(self._probe_levelset, self.points[mask], st.pos, st.quat, st.vel, st.omega,
-                                     st.fixed, tau)
-        return out
 
     def _any_rank(self, flags: np.ndarray) -> np.ndarray:
         """Per-node flags (mesh vertex order) or-ed over the ranks that hold each node."""
@@ -917,4 +900,3 @@ class CoupledModel:
         if self.bonds is not None:                         # bonds broken before the checkpoint are not new
             self._broken_before = self.bonds.broken_bonds()
         self.stats = self.rebuild_cut()
-
