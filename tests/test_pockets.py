@@ -52,7 +52,7 @@ def test_components_of_a_sealed_ring_and_its_slot():
 
 def _vents(p, cells, **kw):
     n = len(p)
-    return PocketVents(MPI.COMM_SELF, cells, np.arange(n), np.ones(n, bool), p[cells], **kw)
+    return PocketVents(MPI.COMM_SELF, cells, np.arange(n), np.ones(n, bool), **kw)
 
 
 def test_vent_removes_the_fill_that_seals_a_pocket_and_only_there():
@@ -84,21 +84,22 @@ def test_bonded_fill_stays_and_a_pocket_without_fill_stays():
                           lambda f: f).any() and vents.pocket_nodes == 0
 
 
-def test_a_pocket_holding_less_than_min_volume_stays():
-    """A sliver pocket (less fluid than ``min_volume``) is below what the mesh resolves: it is
-    counted, not vented; the same pocket is vented when the bound is below its volume, and
-    the default bound is half the smallest cell."""
+def test_a_sliver_pocket_without_a_whole_cell_stays():
+    """A pocket of one fluid node (every cell touching it cut) is below what the mesh resolves:
+    counted, not vented; the ring's pocket holds whole cells and is vented (the other tests)."""
     p, cells = grid(40)
     plain, filled = ring_with_slot(p)
-    inside = np.pi * 0.2 ** 2           # the pocket: the disc r < 0.2 inside the ring
-    level = filled.copy()
-    vents = _vents(p, cells, min_volume=1.02 * inside)
+    i = int(np.argmin(np.hypot(p[:, 0] - C[0], p[:, 1] - C[1])))
+    level = np.where(np.arange(len(p)) == i, 1e-6, np.minimum(filled, -1e-3))   # one node left of the pocket
+    level[filled > 0] = np.where(np.hypot(p[filled > 0, 0] - C[0], p[filled > 0, 1] - C[1]) < 0.2, -1e-3, 1.0)
+    level[i] = 1e-6
+    before = level.copy()
+    vents = _vents(p, cells)
     assert not vents.vent(level, lambda: plain, np.ones(len(p), bool), lambda f: f).any()
-    assert np.array_equal(level, filled) and vents.pocket_nodes > 100 and vents.vented_nodes == 0
-    vents = _vents(p, cells, min_volume=0.98 * inside)
-    assert vents.vent(level, lambda: plain, np.ones(len(p), bool), lambda f: f).any()
-    assert len(np.unique(fluid_components(cells, level > 0)[level > 0])) == 1
-    assert _vents(p, cells).min_volume == pytest.approx(0.5 * 0.5 / 40 ** 2)
+    assert np.array_equal(level, before) and vents.pocket_nodes == 1 and vents.vented_nodes == 0
+    label, size = vents.components(level > 0)
+    counts = vents.whole_cells(label, len(size))
+    assert counts[label[i]] == 0 and counts[int(np.argmax(size))] > 1000
 
 
 MPI_SCRIPT = r"""
@@ -116,11 +117,8 @@ p = S.tabulate_dof_coordinates()[:n]
 from tests.test_pockets import ring_with_slot
 plain, filled = ring_with_slot(p)
 owned = np.arange(n) < imap.size_local
-# a bound of 0.9 x the pocket's volume: no rank holds enough of it alone (on 2 ranks), so the
-# vent needs the summed volume
-coords = p[cells][:, :, :2]
-vents = PocketVents(comm, cells, imap.local_to_global(np.arange(n, dtype=np.int32)), owned, coords,
-                    m.topology.index_map(2).size_local, min_volume=0.9 * np.pi * 0.2 ** 2)
+vents = PocketVents(comm, cells, imap.local_to_global(np.arange(n, dtype=np.int32)), owned,
+                    m.topology.index_map(2).size_local)
 f = fem.Function(S)
 def any_rank(flags):
     f.x.array[:] = 0.0

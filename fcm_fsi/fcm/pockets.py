@@ -17,15 +17,19 @@ block or a block of another bonded cluster. The fill between the blocks of a bon
 is its mortar and stays (an enclosed room of a standing building remains a pocket), and so
 does the fill between two owners that cannot move (a fixed stopper on the floor).
 
-A pocket holding less fluid than half the smallest cell is below what the mesh resolves and
-is left as it is (counted in ``pocket_nodes``, not vented). Venting such a sliver opened more
-than it closed: in block_overturn (30°, full level) at 0.751 s a single node 7 µm inside the
-fluid, in the corner under the tipping block beside the stopper, counted as a pocket; its
-vent removed the fill under the block's lifting edge, and the sub-cell wedge that opened
-there pulled the 10 N block down with up to 12 kN within 12 steps (without vents: < 3 N;
-docs/coupling.md, session 24). The pocket that made the vents (the 784 mm² one at the
-landing, ≈ 30 cells) is far above the bound; its depth is not (the fill's level is
-(g − δ)/2 in a gap g: 3.7 mm there, under δ/2), so the bound is on volume, not on depth.
+A pocket no mesh cell lies in entirely (only cut cells: a sliver of one or two nodes) is
+below what the mesh resolves and is left as it is (counted in ``pocket_nodes``, not vented).
+Venting such a sliver opened more than it closed: in block_overturn (30°, full level) from
+0.751 s a single node, 7 µm inside the fluid at first, in the corner under the tipping block
+beside the stopper, counted as a pocket; its vent removed the fill between the block's
+lifting underside and the floor, and the sub-cell wedge that opened there pulled the 10 N
+block down with up to 12 kN (the first rule, every pocket) or 300–440 N for as long as it was
+open (a bound of half a cell's fluid volume, crossed at 0.770 s); left sealed, the same
+sliver stays benign (|F_y| < 7 N). The pocket that made the vents (the 784 mm² one at the
+landing, 36 nodes) holds whole cells. A bound on depth does not separate the two: the fill's
+level is (g − δ)/2 in a gap g, so the landing pocket is only 3.7 mm deep; nor does venting
+only closing gaps (the landing pocket, sealed while the block rebounded, kicked the block
+with 36 kN at 0.924 s; docs/coupling.md, session 24).
 """
 from __future__ import annotations
 
@@ -34,7 +38,6 @@ import scipy.sparse as sp
 from mpi4py import MPI
 from scipy.sparse.csgraph import connected_components
 
-from .cut import cut_measures
 
 
 def fluid_components(cells: np.ndarray, fluid: np.ndarray) -> np.ndarray:
@@ -69,24 +72,16 @@ class PocketVents:
 
     ``cells`` (nc, nv) local node indices of this rank's cells (owned and ghost), ``global_ids``
     (n,) the global index of every local node, ``owned`` (n,) bool the nodes this rank owns;
-    ``cell_coords`` (nc, nv, gdim) the cells' vertex coordinates, the first ``owned_cells`` of
-    them this rank's own. A pocket is vented when its fluid volume (the cells' P1 fluid parts)
-    exceeds ``min_volume`` [m^d]; the default is half the smallest cell of the mesh.
+    the first ``owned_cells`` of the cells are this rank's own. A pocket is vented when at
+    least one cell lies entirely in it.
     """
 
     def __init__(self, comm: MPI.Comm, cells: np.ndarray, global_ids: np.ndarray, owned: np.ndarray,
-                 cell_coords: np.ndarray, owned_cells: int | None = None, max_passes: int = 20,
-                 min_volume: float | None = None):
+                 owned_cells: int | None = None, max_passes: int = 20):
         self.comm, self.cells = comm, np.asarray(cells, np.int64)
         self.global_ids, self.owned = np.asarray(global_ids, np.int64), np.asarray(owned, bool)
         self.max_passes = int(max_passes)
-        self.cell_coords = np.ascontiguousarray(cell_coords, dtype=float)
         self.owned_cells = len(self.cells) if owned_cells is None else int(owned_cells)
-        if min_volume is None:
-            nv = self.cells.shape[1]
-            full, _ = cut_measures(self.cell_coords[: self.owned_cells], np.ones((self.owned_cells, nv)))
-            min_volume = 0.5 * comm.allreduce(float(full.min(initial=np.inf)), op=MPI.MIN)
-        self.min_volume = float(min_volume)   # a pocket is vented when it holds more fluid [m^d]
         self._order = np.argsort(self.global_ids)
         self._sorted_ids = self.global_ids[self._order]
         self.pocket_nodes = 0          # owned fluid nodes outside the largest component (last check; shallow ones too)
@@ -124,8 +119,8 @@ class PocketVents:
         (changed in place), ``plain_level()`` the level set without it (called only if some fill
         next to a pocket may go), ``ventable`` (n,) bool where the fill may go (between owners
         free to part). Only nodes that the fill made solid (level ≤ 0 < plain) and that share a cell with the pocket
-        go back to the plain level set, so the fill is opened no wider than needed; pockets holding
-        no more fluid than ``min_volume`` are not vented;
+        go back to the plain level set, so the fill is opened no wider than needed; pockets that no
+        cell lies in entirely are not vented;
         ``combine(flags)`` makes per-node flags agree across ranks (logical or over the ranks
         holding a node). Returns the nodes reverted to the plain level set (collective)."""
         reverted = np.zeros(len(level), bool)
@@ -138,9 +133,9 @@ class PocketVents:
                 self.pocket_nodes = int(size.sum() - size.max())
             big = int(np.argmax(size))
             fluid = label >= 0
-            large = self.fluid_volumes(level, label, fluid & (label != big), len(size)) > self.min_volume
-            large[big] = False
-            pocket = fluid & large[np.maximum(label, 0)]
+            resolved = self.whole_cells(label, len(size)) > 0
+            resolved[big] = False
+            pocket = fluid & resolved[np.maximum(label, 0)]
             if not self.comm.allreduce(bool(pocket.any()), op=MPI.LOR):
                 break
             touching = np.zeros(len(level), bool)
@@ -157,16 +152,11 @@ class PocketVents:
         self.vented_nodes = self.comm.allreduce(int(np.count_nonzero(reverted & self.owned)))
         return reverted
 
-    def fluid_volumes(self, level: np.ndarray, label: np.ndarray, where: np.ndarray, ncomp: int) -> np.ndarray:
-        """Fluid volume (ncomp,) [m^d] of every component that has nodes in ``where``: the P1
-        fluid part {level ≥ 0} of the owned cells touching them, summed over the ranks
-        (collective); 0 for the other components. All fluid nodes of a cell share a component."""
-        volume = np.zeros(ncomp)
-        cells = self.cells[: self.owned_cells]
-        touch = where[cells].any(axis=1)
-        if touch.any():
-            inside, _ = cut_measures(self.cell_coords[: self.owned_cells][touch],
-                                     np.ascontiguousarray(level[cells[touch]], dtype=float))
-            np.add.at(volume, label[cells[touch]].max(axis=1), inside)
-        self.comm.Allreduce(MPI.IN_PLACE, volume, op=MPI.SUM)
-        return volume
+    def whole_cells(self, label: np.ndarray, ncomp: int) -> np.ndarray:
+        """Number (ncomp,) of the cells whose nodes all belong to each component, summed over the
+        ranks' own cells (collective)."""
+        lab = label[self.cells[: self.owned_cells]]
+        whole = np.all(lab == lab[:, :1], axis=1) & (lab[:, 0] >= 0)
+        count = np.bincount(lab[whole, 0], minlength=ncomp).astype(np.int64)
+        self.comm.Allreduce(MPI.IN_PLACE, count, op=MPI.SUM)
+        return count

@@ -122,7 +122,7 @@ class CoupledModel:
         if self.gap > 0 and cp.vent_pockets:
             imap, dofs = self.cut.S1.dofmap.index_map, self.cut.level_dofs
             self.vents = PocketVents(comm, self.cut.geom_cells, imap.local_to_global(dofs.astype(np.int32)),
-                                     dofs < imap.size_local, self.cut.cell_coords, self.cut.n_owned)
+                                     dofs < imap.size_local, self.cut.n_owned)
             self._plain_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band)
             self._node_flags = fem.Function(self.cut.S1)
         self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
