@@ -17,7 +17,7 @@ block or a block of another bonded cluster. The fill between the blocks of a bon
 is its mortar and stays (an enclosed room of a standing building remains a pocket), and so
 does the fill between two owners that cannot move (a fixed stopper on the floor).
 
-A pocket no mesh cell lies in entirely (only cut cells: a sliver of one or two nodes) is
+A pocket no mesh cell lies in entirely (only cut cells, e.g. a sliver of one or two nodes) is
 below what the mesh resolves and is left as it is (counted in ``pocket_nodes``, not vented).
 Venting such a sliver opened more than it closed: in block_overturn (30°, full level) from
 0.751 s a single node, 7 µm inside the fluid at first, in the corner under the tipping block
@@ -37,7 +37,6 @@ import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
 from scipy.sparse.csgraph import connected_components
-
 
 
 def fluid_components(cells: np.ndarray, fluid: np.ndarray) -> np.ndarray:
@@ -84,7 +83,7 @@ class PocketVents:
         self.owned_cells = len(self.cells) if owned_cells is None else int(owned_cells)
         self._order = np.argsort(self.global_ids)
         self._sorted_ids = self.global_ids[self._order]
-        self.pocket_nodes = 0          # owned fluid nodes outside the largest component (last check; shallow ones too)
+        self.pocket_nodes = 0          # owned fluid nodes outside the largest component (last check; unvented slivers too)
         self.vented_nodes = 0          # owned nodes whose fill was removed (last call)
 
     def components(self, fluid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
