@@ -50,16 +50,15 @@ def test_components_of_a_sealed_ring_and_its_slot():
     assert len(np.unique(fluid_components(cells, plain > 0)[plain > 0])) == 1
 
 
-def _vents(p, cells, **kw):
-    n = len(p)
-    return PocketVents(MPI.COMM_SELF, cells, np.arange(n), np.ones(n, bool), **kw)
+def _vents(cells, n):
+    return PocketVents(MPI.COMM_SELF, cells, np.arange(n), np.ones(n, bool))
 
 
 def test_vent_removes_the_fill_that_seals_a_pocket_and_only_there():
     p, cells = grid(40)
     plain, filled = ring_with_slot(p)
     level = filled.copy()
-    vents = _vents(p, cells)
+    vents = _vents(cells, len(p))
     reverted = vents.vent(level, lambda: plain, np.ones(len(p), bool), lambda f: f)
     inside = np.hypot(p[:, 0] - C[0], p[:, 1] - C[1]) < 0.2
     assert vents.pocket_nodes == np.count_nonzero(filled[inside] > 0) > 100
@@ -73,7 +72,7 @@ def test_vent_removes_the_fill_that_seals_a_pocket_and_only_there():
 def test_bonded_fill_stays_and_a_pocket_without_fill_stays():
     p, cells = grid(40)
     plain, filled = ring_with_slot(p)
-    vents = _vents(p, cells)
+    vents = _vents(cells, len(p))
     level = filled.copy()
     assert not vents.vent(level, lambda: plain, np.zeros(len(p), bool), lambda f: f).any()   # mortar
     assert np.array_equal(level, filled) and vents.pocket_nodes > 100
@@ -89,12 +88,12 @@ def test_a_sliver_pocket_without_a_whole_cell_stays():
     counted, not vented; the ring's pocket holds whole cells and is vented (the other tests)."""
     p, cells = grid(40)
     plain, filled = ring_with_slot(p)
-    i = int(np.argmin(np.hypot(p[:, 0] - C[0], p[:, 1] - C[1])))
-    level = np.where(np.arange(len(p)) == i, 1e-6, np.minimum(filled, -1e-3))   # one node left of the pocket
-    level[filled > 0] = np.where(np.hypot(p[filled > 0, 0] - C[0], p[filled > 0, 1] - C[1]) < 0.2, -1e-3, 1.0)
-    level[i] = 1e-6
+    r = np.hypot(p[:, 0] - C[0], p[:, 1] - C[1])
+    level = np.where((filled > 0) & (r >= 0.2), 1.0, -1e-3)     # the ring and its inside solid ...
+    i = int(np.argmin(r))
+    level[i] = 1e-6                                              # ... but for one node at the centre
     before = level.copy()
-    vents = _vents(p, cells)
+    vents = _vents(cells, len(p))
     assert not vents.vent(level, lambda: plain, np.ones(len(p), bool), lambda f: f).any()
     assert np.array_equal(level, before) and vents.pocket_nodes == 1 and vents.vented_nodes == 0
     label, size = vents.components(level > 0)

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..config.loader import ConfigError
 from ..config.structure import StructureConfig
+from ..io.csv import read_series
 from .builder import KINDS, building_boxes
 
 
@@ -73,34 +74,29 @@ def read_breaks(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     path = Path(path)
     if not path.exists():
         raise ConfigError(f"{path}: not found (a run with bonded blocks writes it)")
-    lines = path.read_text().splitlines()
-    if len(lines) < 2:
+    if len(path.read_text().splitlines()) < 2:      # the header only: read_series needs a row
         return np.zeros(0), np.zeros(0, int), np.zeros(0, int)
-    head = [h.split(" ")[0] for h in lines[0].split(",")]
-    rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:] if ln.strip()], ndmin=2)
-    col = {h: rows[:, i] for i, h in enumerate(head)}
+    col = read_series(path)
     try:
         return col["t"], col["block_a"].astype(int), col["block_b"].astype(int)
     except KeyError as err:
         raise ConfigError(f"{path}: no column {err} (expected t, bond, block_a, block_b)") from None
 
 
-def sequence_of_run(out_dir: Path, case=None) -> list[MemberFailure]:
-    """The failure sequence of the run in ``out_dir`` from its bond_breaks.csv; ``case`` (a
-    loaded case) defaults to the run's case.resolved.yaml."""
+def sequence_of_case(case, t: np.ndarray, block_a: np.ndarray, block_b: np.ndarray) -> list[MemberFailure]:
+    """:func:`failure_sequence` of the bond breaks (t, block_a, block_b) of a run of ``case``
+    (a loaded case with a ``dem.structure``)."""
+    if case.dem is None or case.dem.structure is None:
+        raise ConfigError(f"case {case.name!r}: no dem.structure (no building to name)")
+    first = len(case.dem.blocks) + sum(g.count for g in case.dem.generators)
+    return failure_sequence(t, block_a, block_b, member_names(case.dem.structure), first)
+
+
+def sequence_of_run(out_dir: Path) -> list[MemberFailure]:
+    """The failure sequence of the run in ``out_dir`` (its case.resolved.yaml and bond_breaks.csv)."""
     from ..config import load_case
     out_dir = Path(out_dir)
-    if case is None:
-        case = load_case(out_dir / "case.resolved.yaml")
-    if case.dem is None or case.dem.structure is None:
-        raise ConfigError(f"{out_dir}: the run's case has no dem.structure (no building to name)")
-    names = member_names(case.dem.structure)
-    first = _blocks_before_structure(case.dem)
-    return failure_sequence(*read_breaks(out_dir / "bond_breaks.csv"), names, first)
-
-
-def _blocks_before_structure(dem) -> int:
-    return len(dem.blocks) + sum(g.count for g in dem.generators)
+    return sequence_of_case(load_case(out_dir / "case.resolved.yaml"), *read_breaks(out_dir / "bond_breaks.csv"))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..registry import Metric, at_least, at_most, register, report_only
 from ...config import case_from_dict
-from ...dem.failure_sequence import MemberFailure, sequence_of_run
+from ...dem.failure_sequence import MemberFailure, sequence_of_case
 from .coupled import case_at_level, run_coupled
 from .phase_field import read_series
 
@@ -86,7 +86,8 @@ def tsunami_building(level, out_dir: Path, comm) -> list[Metric]:
     t_first, pairs = first_breaks(breaks)
     front_first = float(np.all(np.isin(pairs, front).any(axis=1))) if pairs.size else float("nan")
     water = np.abs(series["liquid_volume_error"])
-    sequence = sequence_of_run(sub, case_from_dict(data, source=data["name"])) if some else []
+    sequence = (sequence_of_case(case_from_dict(data, source=data["name"]), breaks["t"], breaks["block_a"],
+                                 breaks["block_b"]) if some else [])
     back_after = back_wall_after_front(sequence)
     if comm.rank == 0:
         _write_sequence(out_dir / "failure_sequence.csv", sequence)
