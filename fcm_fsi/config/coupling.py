@@ -90,13 +90,17 @@ class CouplingConfig:
                                        "of the previous fluid step "
                                        "(exact when converged; needed when the block's added mass exceeds its own)",
                               ge=0, le=20)
-    added_mass_model: Literal["volume", "potential"] = param(
+    added_mass_model: Literal["volume", "potential", "tensor"] = param(
         "volume", doc="what added_mass scales: volume = C_a ρ̄ V_block per block (above); potential = the added mass "
                       "the fluid has at this step — the largest eigenvalue of the translational added-mass tensor of "
                       "each moving block, or bonded cluster with wall_motion bonded_cluster, from the pressure impulse "
                       "of inviscid flow on the current cut and density (coupling/added_mass.py), shared out over the "
                       "cluster's blocks by volume; so it grows as a piece nears the floor or a neighbour (squeeze "
-                      "film, docs/coupling.md); added_mass is then a factor on it (1 = the estimate itself)")
+                      "film, docs/coupling.md); added_mass is then a factor on it (1 = the estimate itself); "
+                      "tensor = the same solves, but the translational tensor itself is the DEM's added inertia "
+                      "(m I + M̃, each direction its own added mass; rotations as potential): the largest eigenvalue "
+                      "over-corrects the directions where the fluid answers less, and the lagged excess returns a "
+                      "landing as a bounce (docs/coupling.md, session 25)")
     depth: float | None = param(None, unit="m", doc="2D fluid only: out-of-plane extent of the blocks; the "
                                                    "per-unit-depth fluid force is multiplied by it", gt=0)
     band: float | None = param(None, unit="m", doc="level-set band half-width (default 2 × the largest cell)", gt=0)

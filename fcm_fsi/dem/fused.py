@@ -34,7 +34,7 @@ CHUNKS = 64   # block ranges per step (each thread takes CHUNKS / threads of the
 
 @nb.njit(cache=True)
 def _advance_range(b0, b1, blk_sph_start, sph_pos, sph_radius, sph_material, sph_local,
-                   pos, quat, vel, omega, angmom, mass, inertia, fixed, ext_force, ext_torque, gravity,
+                   pos, quat, vel, omega, angmom, mass, inv_mass, inertia, fixed, ext_force, ext_torque, gravity,
                    sp_start, sp_pair, sp_sign, act, pair_f, pair_x,
                    planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, whist, wheld, wtab, clip,
                    dt, force, torque):
@@ -60,7 +60,7 @@ def _advance_range(b0, b1, blk_sph_start, sph_pos, sph_radius, sph_material, sph
         for d in range(3):
             torque[b, d] += ext_torque[b, d]
         if not fixed[b]:
-            _kick_block(b, vel, angmom, mass, force, torque, dt)
+            _kick_block(b, vel, angmom, mass, inv_mass, force, torque, dt)
             _drift_block(b, pos, quat, vel, angmom, omega, inertia, dt)
         _place_block_spheres(b, pos, quat, blk_sph_start, sph_local, sph_pos)
     return e_s, d_d, d_f
@@ -68,7 +68,7 @@ def _advance_range(b0, b1, blk_sph_start, sph_pos, sph_radius, sph_material, sph
 
 @nb.njit(cache=True, parallel=True)
 def advance_blocks(blk_sph_start, sph_pos, sph_radius, sph_material, sph_local,
-                   pos, quat, vel, omega, angmom, mass, inertia, fixed, ext_force, ext_torque, gravity,
+                   pos, quat, vel, omega, angmom, mass, inv_mass, inertia, fixed, ext_force, ext_torque, gravity,
                    sp_start, sp_pair, sp_sign, act, pair_f, pair_x,
                    planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, whist, wheld, wtab, clip,
                    dt, force, torque):
@@ -81,7 +81,7 @@ def advance_blocks(blk_sph_start, sph_pos, sph_radius, sph_material, sph_local,
     part = np.zeros((max(nch, 1), 3))
     for c in nb.prange(nch):
         r = _advance_range(c * nbk // nch, (c + 1) * nbk // nch, blk_sph_start, sph_pos, sph_radius, sph_material,
-                           sph_local, pos, quat, vel, omega, angmom, mass, inertia, fixed, ext_force, ext_torque,
+                           sph_local, pos, quat, vel, omega, angmom, mass, inv_mass, inertia, fixed, ext_force, ext_torque,
                            gravity, sp_start, sp_pair, sp_sign, act, pair_f, pair_x, planes, plane_mat, tris,
                            tri_mesh, mesh_mat, nmesh, active, whist, wheld, wtab, clip, dt, force, torque)
         part[c, 0] = r[0]

@@ -51,18 +51,26 @@ def _omega_world(q, L, inertia_b, out):
 
 
 @nb.njit(cache=True, parallel=True)
-def kick(vel, angmom, mass, force, torque, fixed, dt):
-    """v += Δt F/m, L += Δt T for every free block."""
+def kick(vel, angmom, mass, inv_mass, force, torque, fixed, dt):
+    """v += Δt F/m, L += Δt T for every free block; with ``inv_mass`` (nb, 3, 3) (not empty)
+    v += Δt (inv_mass F): a translational inertia tensor (a block with its fluid's added-mass
+    tensor, ``coupling.added_mass_model: tensor``); empty (0, 3, 3): the scalar ``mass``."""
     for b in nb.prange(vel.shape[0]):
         if fixed[b]:
             continue
-        _kick_block(b, vel, angmom, mass, force, torque, dt)
+        _kick_block(b, vel, angmom, mass, inv_mass, force, torque, dt)
 
 
 @nb.njit(cache=True, inline="always")
-def _kick_block(b, vel, angmom, mass, force, torque, dt):
+def _kick_block(b, vel, angmom, mass, inv_mass, force, torque, dt):
+    if inv_mass.shape[0] > 0:
+        f0, f1, f2 = force[b, 0], force[b, 1], force[b, 2]
+        for d in range(3):
+            vel[b, d] += dt * (inv_mass[b, d, 0] * f0 + inv_mass[b, d, 1] * f1 + inv_mass[b, d, 2] * f2)
+    else:
+        for d in range(3):
+            vel[b, d] += dt * force[b, d] / mass[b]
     for d in range(3):
-        vel[b, d] += dt * force[b, d] / mass[b]
         angmom[b, d] += dt * torque[b, d]
 
 

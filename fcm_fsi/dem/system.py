@@ -84,6 +84,10 @@ class DEMSystem:
         self.vel_prev = state.vel.copy()        # v_{n−1/2} kept for the ledger
         self.angmom_prev = state.angmom.copy()
         self.fuse = True                        # False: always the stage-by-stage step (tests)
+        # translational inverse inertia tensors (nb, 3, 3) the kick uses instead of 1/mass when
+        # not empty: a block's own mass with its fluid's added-mass tensor (coupled runs with
+        # ``coupling.added_mass_model: tensor`` set it every fluid step); not part of the state
+        self.inv_mass = np.zeros((0, 3, 3))
 
     # ------------------------------------------------------------------ stages
     def compute_forces(self) -> None:
@@ -132,7 +136,7 @@ class DEMSystem:
                      walls.until > st.t, walls.hist, walls.held, walls.material_table())
             clip = walls.clip
         es, dd, df = advance_blocks(st.blk_sph_start, st.sph_pos, st.sph_radius, st.sph_material, st.sph_local,
-                                    st.pos, st.quat, st.vel, st.omega, st.angmom, st.mass, st.inertia, st.fixed,
+                                    st.pos, st.quat, st.vel, st.omega, st.angmom, st.mass, self.inv_mass, st.inertia, st.fixed,
                                     st.ext_force, st.ext_torque, self.gravity,
                                     nl.sp_start, nl.sp_pair, nl.sp_sign, contact.act, contact.pair_f, contact.pair_x,
                                     *wargs, clip, dt, self.force, self.torque)
@@ -153,7 +157,7 @@ class DEMSystem:
             self.vel_prev[:] = st.vel
             self.angmom_prev[:] = st.angmom
             vm, Lm = self.vel_prev, self.angmom_prev
-        kick(st.vel, st.angmom, st.mass, self.force, self.torque, st.fixed, dt)
+        kick(st.vel, st.angmom, st.mass, self.inv_mass, self.force, self.torque, st.fixed, dt)
         if self.controls is not None:
             self.controls.enforce(st, dt)
         if self.ledger is not None:

@@ -31,7 +31,11 @@ of a block exceeds about its own mass (a floating box: m_a ≈ 1.6 m). ``couplin
 the volume of the shape the fluid sees (a block widened by ``coupling.min_thickness`` drags the
 fluid of its widened shape along, at its larger lever arms), and adds m̃ a (and Ĩ α) of the previous fluid step to the
 load, minus m̃ g so the weight is unchanged:  (m + m̃) aⁿ⁺¹ = F_fluid + m g + m̃ aⁿ. At a converged or steady motion
-this is exact; in a transient it lags by one fluid step, O(Δt ȧ).
+this is exact; in a transient it lags by one fluid step, O(Δt ȧ). aⁿ is the change, over a fluid step, of
+the wall velocity the fluid is given (``coupling.wall_velocity``: end-of-step or mean velocities), since the
+fluid's added-mass reaction answers that change: with ``mean``, an impact in the middle of a step shows in
+the fluid as two half-changes over two steps, and the end-of-step difference (the whole change in the first
+step, none in the second) left ±½ m̃ Δv/Δt uncancelled — a spurious bounce (docs/coupling.md, session 25).
 """
 from __future__ import annotations
 
@@ -96,6 +100,7 @@ class CoupledModel:
         self._remember_own_inertia(case)
         self.added_mass = np.zeros(self.nb)         # m̃ per block, set every step (_update_added_mass)
         self.added_inertia = np.zeros((self.nb, 3))  # Ĩ per block (body axes)
+        self.added_tensor = None                     # (nb, 3, 3) M̃ per block (added_mass_model: tensor)
         self._potential = None                       # added_mass_model: potential (built at first use)
         self._energy_limit = None                    # health(): set at the first check
         self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
@@ -194,7 +199,7 @@ class CoupledModel:
                 cols[key] = unit
             self.bodies_csv = TimeSeriesCSV(Path(out_dir) / "bodies.csv", cols, comm.rank, lazy=True)
         self.added_mass_csv = None
-        if out_dir is not None and case.coupling.added_mass_model == "potential" and case.coupling.added_mass > 0:
+        if out_dir is not None and case.coupling.added_mass_model in ("potential", "tensor") and case.coupling.added_mass > 0:
             from ..io.csv import TimeSeriesCSV
             self.added_mass_csv = TimeSeriesCSV(Path(out_dir) / "added_mass.csv",
                                                 {"t": "s", "block": "-", "m_tilde": "kg", "i_tilde": "kg m^2",
@@ -241,7 +246,7 @@ class CoupledModel:
         if ca == 0.0:
             return
         st = self.system.state
-        if self.case.coupling.added_mass_model == "potential":
+        if self.case.coupling.added_mass_model in ("potential", "tensor"):
             extra, extra_inertia = self._potential_added_mass(ca)
         else:
             # (negative fitted surface weights can overshoot a sharp ρ jump slightly: clip at 0)
@@ -252,6 +257,14 @@ class CoupledModel:
         self.added_mass, self.added_inertia = extra, extra_inertia
         st.mass[:] = self.mass0 + extra
         st.inertia[:] = self.inertia0 + extra_inertia
+        if self.added_tensor is not None:
+            # the kick's inverse of m I + M̃ (st.mass = m + λ_min(M̃) carries gravity, the contact
+            # dashpots and Δt_cr: the lightest direction); fixed blocks are not kicked
+            free = ~st.fixed
+            tens = self.added_tensor.copy()
+            tens[free] += self.mass0[free, None, None] * np.eye(3)[None]
+            tens[~free] = np.eye(3)[None]
+            self.system.inv_mass = np.linalg.inv(tens)
 
     def _potential_added_mass(self, factor: float) -> tuple[np.ndarray, np.ndarray]:
         """``added_mass_model: potential``: m̃ (nb,) [kg] and Ĩ (nb, 3) [kg m²] per block from
@@ -269,6 +282,9 @@ class CoupledModel:
         labels = self._cluster_labels()
         groups = [g for g in np.unique(labels) if not st.fixed[labels == g].any()]
         extra, extra_inertia = np.zeros(self.nb), np.zeros((self.nb, 3))
+        tensor = self.case.coupling.added_mass_model == "tensor"
+        if tensor:
+            self.added_tensor = np.zeros((self.nb, 3, 3))
         if not groups:
             return extra, extra_inertia
         pot.assemble()
@@ -285,12 +301,17 @@ class CoupledModel:
             centres[i] = (m[:, None] * st.pos[inside]).sum(axis=0) / m.sum()
         M = pot.tensors(weights, centres) * self.depth
         d = self.gdim
-        m_group = factor * largest_eigenvalue(M[:, :d, :d])
+        if tensor:   # the translational tensor itself; the scalar part is its smallest eigenvalue
+            m_group = factor * np.maximum(np.linalg.eigvalsh(M[:, :d, :d])[:, 0], 0.0)
+        else:
+            m_group = factor * largest_eigenvalue(M[:, :d, :d])
         j_group = factor * largest_eigenvalue(M[:, d:, d:])
         for i, g in enumerate(groups):
             blocks = np.flatnonzero(labels == g)
             share_b = self.volume_b[blocks] / self.volume_b[blocks].sum()
             extra[blocks] = m_group[i] * share_b
+            if tensor:
+                self.added_tensor[blocks, :d, :d] = factor * share_b[:, None, None] * M[i, :d, :d][None]
             r = st.pos[blocks] - centres[i]
             if d == 2:
                 carried = float((extra[blocks] * (r[:, 0] ** 2 + r[:, 1] ** 2)).sum())
@@ -313,16 +334,19 @@ class CoupledModel:
             force, torque = self.relaxed_load[: self.nb], self.relaxed_load[self.nb:]
         else:
             force, torque = self.force, self.torque
-        if not self.added_mass.any():
+        if not self.added_mass.any() and (self.added_tensor is None or not self.added_tensor.any()):
             return force.copy(), torque.copy()
         st = self.system.state
         g = np.asarray(self.case.dem.gravity)
         accel, alpha = self.accel, self.alpha_ang
-        if self.case.coupling.added_mass_model == "potential" and self._by_cluster():
+        if self.case.coupling.added_mass_model in ("potential", "tensor") and self._by_cluster():
             # the fluid answers the cluster's rigid acceleration (the motion it sees), not the bonds' ringing
             X, A, Al = self._cluster_rigid(st.pos, self.accel, self.alpha_ang)
             accel, alpha = A + np.cross(Al, st.pos - X), Al
-        F = force + self.added_mass[:, None] * (accel - g[None, :])
+        if self.added_tensor is not None:    # M̃ aⁿ − m̃ g (m̃ = λ_min(M̃) is in the DEM's scalar mass)
+            F = force + np.einsum("bij,bj->bi", self.added_tensor, accel) - self.added_mass[:, None] * g[None, :]
+        else:
+            F = force + self.added_mass[:, None] * (accel - g[None, :])
         R = st.rotation_matrices()
         body = np.einsum("bji,bj->bi", R, alpha) * self.added_inertia
         T = torque + np.einsum("bij,bj->bi", R, body)
@@ -638,14 +662,18 @@ class CoupledModel:
             # longer than dem.dt that fill it exactly
             n_sub = int(np.ceil(dt / self.case.dem.dt * (1 - 1e-9)))
             self.system.dt = dt / n_sub
-            v0, w0 = st.vel.copy(), st.omega.copy()
+            mean = self.case.coupling.wall_velocity == "mean"
+            _, v0, w0 = (a.copy() for a in self.dem.motion(mean=mean))
             F, T = self._stabilised_load()
             try:
                 self.dem.advance(dt, F, T, self.case.coupling.force_mode)
             finally:
                 self.system.dt = self.case.dem.dt
-            self.accel[:] = (st.vel - v0) / dt
-            self.alpha_ang[:] = (st.omega - w0) / dt
+            # the change of the wall velocity the fluid gets next step against the one it got
+            # this step: what the fluid's added-mass reaction answers, so m̃ aⁿ cancels it
+            _, v1, w1 = self.dem.motion(mean=mean)
+            self.accel[:] = (v1 - v0) / dt
+            self.alpha_ang[:] = (w1 - w0) / dt
         return F, fluid_side
 
     def _block_velocities(self) -> np.ndarray:
