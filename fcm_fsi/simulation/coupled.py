@@ -199,7 +199,7 @@ class CoupledModel:
                 cols[key] = unit
             self.bodies_csv = TimeSeriesCSV(Path(out_dir) / "bodies.csv", cols, comm.rank, lazy=True)
         self.added_mass_csv = None
-        if out_dir is not None and case.coupling.added_mass_model in ("potential", "tensor") and case.coupling.added_mass > 0:
+        if out_dir is not None and self._added_mass_from_flow() and case.coupling.added_mass > 0:
             from ..io.csv import TimeSeriesCSV
             self.added_mass_csv = TimeSeriesCSV(Path(out_dir) / "added_mass.csv",
                                                 {"t": "s", "block": "-", "m_tilde": "kg", "i_tilde": "kg m^2",
@@ -246,8 +246,8 @@ class CoupledModel:
         if ca == 0.0:
             return
         st = self.system.state
-        if self.case.coupling.added_mass_model in ("potential", "tensor"):
-            extra, extra_inertia = self._potential_added_mass(ca)
+        if self._added_mass_from_flow():
+            extra, extra_inertia, self.added_tensor = self._potential_added_mass(ca)
         else:
             # (negative fitted surface weights can overshoot a sharp ρ jump slightly: clip at 0)
             rho_bar = np.maximum(np.nan_to_num(self.cut.wetted_mean(self.nb, self._rho_field), nan=0.0), 0.0)
@@ -266,14 +266,20 @@ class CoupledModel:
             tens[~free] = np.eye(3)[None]
             self.system.inv_mass = np.linalg.inv(tens)
 
-    def _potential_added_mass(self, factor: float) -> tuple[np.ndarray, np.ndarray]:
+    def _added_mass_from_flow(self) -> bool:
+        """Whether m̃ comes from the flow's added-mass tensor (``added_mass_model`` potential or tensor)."""
+        return self.case.coupling.added_mass_model in ("potential", "tensor")
+
+    def _potential_added_mass(self, factor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``added_mass_model: potential``: m̃ (nb,) [kg] and Ĩ (nb, 3) [kg m²] per block from
         the added-mass tensor M of each moving group (block, or bonded cluster with
         ``wall_motion: bonded_cluster``) on the current cut (``coupling/added_mass.py``):
         m̃_group = factor × λ_max(M_translation), shared over its blocks by fluid-seen volume;
         the rotational λ_max(M_rotation) about the group's centre of mass, less what the shared
         m̃ already gives at the blocks' offsets, shared alike as Ĩ on every axis. Groups
-        holding a fixed block get none. Writes added_mass.csv."""
+        holding a fixed block get none. Writes added_mass.csv. ``tensor``: m̃ is factor ×
+        λ_min(M_translation) shared alike, and the third result is each block's share of
+        factor × M_translation (nb, 3, 3) (None with ``potential``)."""
         from ..coupling.added_mass import PotentialAddedMass, largest_eigenvalue
         st = self.system.state
         if self._potential is None:
@@ -283,10 +289,9 @@ class CoupledModel:
         groups = [g for g in np.unique(labels) if not st.fixed[labels == g].any()]
         extra, extra_inertia = np.zeros(self.nb), np.zeros((self.nb, 3))
         tensor = self.case.coupling.added_mass_model == "tensor"
-        if tensor:
-            self.added_tensor = np.zeros((self.nb, 3, 3))
+        added_tensor = np.zeros((self.nb, 3, 3)) if tensor else None
         if not groups:
-            return extra, extra_inertia
+            return extra, extra_inertia, added_tensor
         pot.assemble()
         ncell = len(self.cut.cell_owner)
         owner, second, share = self.cut.cell_owner, self.cut.cell_second, self.cut.cell_share
@@ -311,7 +316,7 @@ class CoupledModel:
             share_b = self.volume_b[blocks] / self.volume_b[blocks].sum()
             extra[blocks] = m_group[i] * share_b
             if tensor:
-                self.added_tensor[blocks, :d, :d] = factor * share_b[:, None, None] * M[i, :d, :d][None]
+                added_tensor[blocks, :d, :d] = factor * share_b[:, None, None] * M[i, :d, :d][None]
             r = st.pos[blocks] - centres[i]
             if d == 2:
                 carried = float((extra[blocks] * (r[:, 0] ** 2 + r[:, 1] ** 2)).sum())
@@ -323,7 +328,7 @@ class CoupledModel:
                 if extra[b] > 0:
                     self.added_mass_csv.write(t=self.ns.t, block=b, m_tilde=extra[b], i_tilde=extra_inertia[b].max(),
                                               solves=pot.last_solves)
-        return extra, extra_inertia
+        return extra, extra_inertia, added_tensor
 
     def _stabilised_load(self) -> tuple[np.ndarray, np.ndarray]:
         """Fluid load (relaxed: ω F + (1 − ω) × the last relaxed load) + m̃ aⁿ − m̃ g and
@@ -339,7 +344,7 @@ class CoupledModel:
         st = self.system.state
         g = np.asarray(self.case.dem.gravity)
         accel, alpha = self.accel, self.alpha_ang
-        if self.case.coupling.added_mass_model in ("potential", "tensor") and self._by_cluster():
+        if self._added_mass_from_flow() and self._by_cluster():
             # the fluid answers the cluster's rigid acceleration (the motion it sees), not the bonds' ringing
             X, A, Al = self._cluster_rigid(st.pos, self.accel, self.alpha_ang)
             accel, alpha = A + np.cross(Al, st.pos - X), Al
