@@ -338,3 +338,19 @@ def test_failure_sequence_cli_reads_a_run_folder_and_the_back_wall_rule(tmp_path
     assert back_wall_after_front(seq(("wall xmax s1", 0.5), ("wall xmin s0", 1.0))) == 0.0
     assert back_wall_after_front(seq(("wall xmin s0", 1.0), ("column s0", 2.0))) == 0.0
     assert np.isnan(back_wall_after_front(seq(("wall xmax s0", 1.0))))
+
+
+def test_front_wall_fails_first_names_the_members_of_the_first_breaking_step():
+    from fcm_fsi.config import load_case
+    from fcm_fsi.dem.failure_sequence import block_members
+    from fcm_fsi.verify.cases.tsunami import front_wall_first
+    members = block_members(load_case(ROOT / "cases" / "tsunami_building.yaml"))
+    assert len(members) == 208 + len([m for m in members if m == "foundation"])
+    # the order of the CLI test above: block 16 is the front wall's first, 32 the back wall's,
+    # 0 a ground-floor column, 208 the foundation
+    assert (members[16], members[32], members[0], members[208]) == ("wall xmin s0", "wall xmax s0", "column s0",
+                                                                    "foundation")
+    assert front_wall_first(np.array([[16, 208], [17, 16]]), members) == 1.0
+    assert front_wall_first(np.array([[16, 208], [0, 208]]), members) == 0.0   # a column joint too
+    assert front_wall_first(np.array([[32, 33]]), members) == 0.0
+    assert np.isnan(front_wall_first(np.zeros((0, 2), int), members))

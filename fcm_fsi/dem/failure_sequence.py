@@ -83,13 +83,20 @@ def read_breaks(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ConfigError(f"{path}: no column {err} (expected t, bond, block_a, block_b)") from None
 
 
-def sequence_of_case(case, t: np.ndarray, block_a: np.ndarray, block_b: np.ndarray) -> list[MemberFailure]:
-    """:func:`failure_sequence` of the bond breaks (t, block_a, block_b) of a run of ``case``
-    (a loaded case with a ``dem.structure``)."""
+def block_members(case) -> list[str]:
+    """The member of every block of ``case`` (a loaded case with a ``dem.structure``), indexed
+    by block number: ``block N`` for the blocks before the structure (``dem.blocks``, then the
+    generators), then :func:`member_names` of the structure."""
     if case.dem is None or case.dem.structure is None:
         raise ConfigError(f"case {case.name!r}: no dem.structure (no building to name)")
     first = len(case.dem.blocks) + sum(g.count for g in case.dem.generators)
-    return failure_sequence(t, block_a, block_b, member_names(case.dem.structure), first)
+    return [f"block {k}" for k in range(first)] + member_names(case.dem.structure)
+
+
+def sequence_of_case(case, t: np.ndarray, block_a: np.ndarray, block_b: np.ndarray) -> list[MemberFailure]:
+    """:func:`failure_sequence` of the bond breaks (t, block_a, block_b) of a run of ``case``
+    (a loaded case with a ``dem.structure``)."""
+    return failure_sequence(t, block_a, block_b, block_members(case))
 
 
 def sequence_of_run(out_dir: Path) -> list[MemberFailure]:

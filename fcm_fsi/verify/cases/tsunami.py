@@ -7,8 +7,9 @@ level to 1.5 s — long enough for the front to reach and load the building.
 KEYs (issue #9): ``completed`` (1 when t_end was reached), ``broken_bonds`` (count at the
 end, reported), ``volume_error`` (largest relative change of the liquid volume {φ ≥ ½} in
 the fluid part, ``liquid_volume_error``, ≤ 0.5 % as for the dam breaks), ``front_wall_fails_first`` (1 when every bond of the first
-breaking step joins a block of the ground-floor front wall — the storey-0 blocks whose
-centre lies within one wall thickness of the front (x-min) grid line; NaN when no bond broke).
+breaking step joins a block of the ground-floor front wall — member ``wall xmin s0`` of
+:func:`fcm_fsi.dem.failure_sequence.member_names`, the wall blocks on the front (x-min) grid
+line of storey 0, columns not included; NaN when no bond broke).
 Reported too: ``back_wall_fails_after_front`` (1 when a back-wall (x-max) bond breaks after the
 front wall's first — the paper's sequence; 0 when not; NaN when no bond broke) and the whole
 sequence, member by member, in ``failure_sequence.csv`` (:mod:`fcm_fsi.dem.failure_sequence`).
@@ -21,7 +22,7 @@ import numpy as np
 
 from ..registry import Metric, at_least, at_most, register, report_only
 from ...config import case_from_dict
-from ...dem.failure_sequence import MemberFailure, sequence_of_case
+from ...dem.failure_sequence import MemberFailure, block_members, failure_sequence
 from .coupled import case_at_level, run_coupled
 from .phase_field import read_series
 
@@ -33,13 +34,7 @@ def quick_tsunami(data: dict) -> None:
     data["run"]["t_end"] = 1.5
 
 
-def front_wall_blocks(data: dict, x0: np.ndarray) -> np.ndarray:
-    """Indices of the ground-floor front-wall blocks from their initial centres ``x0`` (nb, 3)."""
-    s = data["dem"]["structure"]
-    ox, oz = s["origin"][0], s["origin"][2]
-    near_front = np.abs(x0[:, 0] - ox) <= s["wall_thickness"]
-    ground = x0[:, 2] < oz + s["storey_height"]
-    return np.flatnonzero(near_front & ground)
+FRONT_WALL = "wall xmin s0"      # the ground-floor front wall (the water comes from −x)
 
 
 def first_breaks(breaks: dict[str, np.ndarray]) -> tuple[float, np.ndarray]:
@@ -50,14 +45,23 @@ def first_breaks(breaks: dict[str, np.ndarray]) -> tuple[float, np.ndarray]:
     return float(breaks["t"].min()), np.column_stack([breaks["block_a"][first], breaks["block_b"][first]]).astype(int)
 
 
+def front_wall_first(pairs: np.ndarray, members: list[str]) -> float:
+    """1 when every bond (block pair) of the first breaking step touches a block of the
+    ground-floor front wall (``members[k]`` is block k's member), 0 when one does not, NaN
+    when no bond broke."""
+    if len(pairs) == 0:
+        return float("nan")
+    return float(all(FRONT_WALL in (members[a], members[b]) for a, b in pairs))
+
+
 def back_wall_after_front(sequence: list[MemberFailure]) -> float:
     """1 when a back-wall (x-max, any storey) bond breaks after the ground-floor front wall's
     first break, 0 when it does not, NaN when the front wall never broke."""
     first = {f.member: f.first_break for f in sequence}
-    if "wall xmin s0" not in first:
+    if FRONT_WALL not in first:
         return float("nan")
     back = [t for m, t in first.items() if m.startswith("wall xmax")]
-    return float(bool(back) and min(back) > first["wall xmin s0"])
+    return float(bool(back) and min(back) > first[FRONT_WALL])
 
 
 def _write_sequence(path: Path, sequence: list[MemberFailure]) -> None:
@@ -76,18 +80,14 @@ def tsunami_building(level, out_dir: Path, comm) -> list[Metric]:
     data = case_at_level("tsunami_building", level, out_dir, quick_tsunami, resolution=True)
     series, wall, failure = run_coupled(data, out_dir, comm)
     sub = out_dir / data["name"]
-    bodies = read_series(sub / "bodies.csv")
-    nb = int(bodies["block"].max()) + 1
-    x0 = np.column_stack([bodies[k][:nb] for k in "xyz"])
-    front = front_wall_blocks(data, x0)
     path = sub / "bond_breaks.csv"
     some = path.exists() and len(path.read_text().splitlines()) > 1
     breaks = read_series(path) if some else {"t": np.zeros(0)}
     t_first, pairs = first_breaks(breaks)
-    front_first = float(np.all(np.isin(pairs, front).any(axis=1))) if pairs.size else float("nan")
+    members = block_members(case_from_dict(data, source=data["name"]))
+    front_first = front_wall_first(pairs, members)
     water = np.abs(series["liquid_volume_error"])
-    sequence = (sequence_of_case(case_from_dict(data, source=data["name"]), breaks["t"], breaks["block_a"],
-                                 breaks["block_b"]) if some else [])
+    sequence = failure_sequence(breaks["t"], breaks["block_a"], breaks["block_b"], members) if some else []
     back_after = back_wall_after_front(sequence)
     if comm.rank == 0:
         _write_sequence(out_dir / "failure_sequence.csv", sequence)
