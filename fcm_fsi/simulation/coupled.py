@@ -682,9 +682,16 @@ class CoupledModel:
         return F, fluid_side
 
     def _block_velocities(self) -> np.ndarray:
-        """v and ω × radius of gyration of every block, flattened [m/s] (the iterated unknown)."""
-        st = self.system.state
-        return np.concatenate([st.vel, st.omega * self.gyration[:, None]]).ravel()
+        """The iterated unknown [m/s], flattened: per block the V and Ω × radius of gyration of
+        the rigid motion its wall nodes get (:meth:`_wall_motion`: with ``wall_velocity: mean``
+        the sub-steps' mean, with ``wall_motion: bonded_cluster`` its cluster's motion).
+
+        Why not the end-of-step v, ω: the fluid never sees them in those modes, so iterating on
+        them fed the fluid a velocity the explicit step does not (the end-of-step one) and
+        measured the bonds' ringing, which no pass can converge (session 26: every step of the
+        tsunami's σ_c/4 run took the 6 passes allowed, residual 1e-4…3e-2)."""
+        _, V, W = self._wall_motion()
+        return np.concatenate([V, W * self.gyration[:, None]]).ravel()
 
     def _record_bond_breaks(self, t: float) -> None:
         """Append the bonds that broke during this step to ``bond_breaks.csv`` (time, bond,
