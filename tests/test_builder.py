@@ -307,11 +307,11 @@ def test_member_names_follow_the_blocks_and_the_sequence_orders_members_by_first
     assert mass["wall xmin s0"] < mass["wall xmax s0"]   # the door
     col = names.index("column s0")
     # two breaks at 1.0 s (front–column, front–front), one at 2.0 s (back–back), one outside
-    # the structure (block 0 is a loose block before it: first_block = 1)
+    # the structure (block 0 is a loose block before it, named as block_members names it)
     t = np.array([2.0, 1.0, 1.0, 3.0])
     a = np.array([back[0] + 1, front[0] + 1, front[1] + 1, 0])
     b = np.array([back[1] + 1, col + 1, front[2] + 1, 0])
-    seq = failure_sequence(t, a, b, names, first_block=1)
+    seq = failure_sequence(t, a, b, ["block 0"] + names)
     assert [(f.member, f.first_break, f.bonds) for f in seq] == [
         ("column s0", 1.0, 1), ("wall xmin s0", 1.0, 2), ("wall xmax s1", 2.0, 1), ("block 0", 3.0, 1)]
 

@@ -53,17 +53,16 @@ def member_names(cfg: StructureConfig) -> list[str]:
 
 
 def failure_sequence(t: np.ndarray, block_a: np.ndarray, block_b: np.ndarray,
-                     names: list[str], first_block: int = 0) -> list[MemberFailure]:
+                     names: list[str]) -> list[MemberFailure]:
     """Members in the order of their first broken bond (ties: by name). ``t``, ``block_a``,
-    ``block_b`` are the columns of ``bond_breaks.csv``; ``names[i]`` is the member of block
-    ``first_block + i``; a block outside the structure is named ``block N``."""
+    ``block_b`` are the columns of ``bond_breaks.csv``; ``names[k]`` is the member of block k
+    (:func:`block_members`); a block beyond the list is named ``block N``."""
     def name(k: int) -> str:
-        i = int(k) - first_block
-        return names[i] if 0 <= i < len(names) else f"block {int(k)}"
+        return names[k] if 0 <= k < len(names) else f"block {k}"
 
     seen: dict[str, list[float]] = {}
     for ti, a, b in zip(np.asarray(t, float), block_a, block_b):
-        for m in {name(a), name(b)}:
+        for m in {name(int(a)), name(int(b))}:
             seen.setdefault(m, []).append(float(ti))
     out = [MemberFailure(m, min(ts), len(ts), max(ts)) for m, ts in seen.items()]
     return sorted(out, key=lambda f: (f.first_break, f.member))
