@@ -101,6 +101,28 @@ def test_a_sliver_pocket_without_a_whole_cell_stays():
     assert counts[label[i]] == 0 and counts[int(np.argmax(size))] > 1000
 
 
+def test_drainable_pocket_its_rim_and_inner_nodes():
+    """coupling.drain_pockets: the sealed inside of the ring is pocket 0, its rim is main fluid
+    just outside the ring (reached through the ring's solid), and its inner nodes are the
+    pocket nodes no cut cell touches; mortar (not ventable) seals a pocket that is not drained."""
+    p, cells = grid(40)
+    _, filled = ring_with_slot(p)
+    r = np.hypot(p[:, 0] - C[0], p[:, 1] - C[1])
+    vents = _vents(cells, len(p))
+    pocket, rim = vents.drainable(filled, np.ones(len(p), bool), lambda f: f, max_layers=8)
+    assert np.array_equal(pocket >= 0, (filled > 0) & (r < 0.2)) and set(np.unique(pocket)) == {-1, 0}
+    assert vents.drained_nodes == vents.pocket_nodes == np.count_nonzero(pocket == 0)
+    assert rim.max() == 0 and np.all(r[rim == 0] > 0.3) and np.all(filled[rim == 0] > 0)
+    assert np.all(r[rim == 0] < 0.3 + 6 / 40)                    # the first layers beyond the ring
+    inner = vents.inner_nodes(pocket, lambda f: f)
+    for i in range(len(p)):                                      # brute force: every cell of i in the pocket
+        mine = np.any(cells == i, axis=1)
+        assert inner[i] == bool(pocket[i] == 0 and np.all(pocket[cells[mine]] == 0))
+    assert 0 < inner.sum() < (pocket == 0).sum()
+    pocket, rim = vents.drainable(filled, np.zeros(len(p), bool), lambda f: f, max_layers=8)
+    assert np.all(pocket < 0) and np.all(rim < 0) and vents.pocket_nodes > 100 and vents.drained_nodes == 0
+
+
 MPI_SCRIPT = r"""
 import json, numpy as np
 from mpi4py import MPI
@@ -129,22 +151,26 @@ label, size = vents.components(filled > 0)
 level = filled.copy()
 reverted = vents.vent(level, lambda: plain, np.ones(n, bool), any_rank)
 after, size_after = vents.components(level > 0)
+pk, rm = vents.drainable(filled, np.ones(n, bool), any_rank, max_layers=8)
+inner = vents.inner_nodes(pk, any_rank)
+drain = [comm.allreduce(int(np.count_nonzero(a & owned))) for a in (pk >= 0, rm >= 0, inner)]
 g = imap.local_to_global(np.arange(n, dtype=np.int32))
-rows = comm.gather(np.column_stack([g, label, after, reverted]), root=0)
+rows = comm.gather(np.column_stack([g, label, after, reverted, pk, rm, inner]), root=0)
 if comm.rank == 0:
     allrows = np.concatenate(rows)
     consistent = all(len(np.unique(allrows[allrows[:, 0] == k][:, 1:], axis=0)) == 1
                      for k in np.unique(allrows[:, 0]))
     print("RESULT" + json.dumps({"components": int(np.count_nonzero(size)), "after": int(np.count_nonzero(size_after)),
                                  "pocket": vents.pocket_nodes, "vented": vents.vented_nodes,
-                                 "consistent": bool(consistent), "ranks": comm.size}))
+                                 "consistent": bool(consistent), "ranks": comm.size, "drain": drain}))
 """
 
 
 @pytest.mark.mpi
 def test_components_and_vents_agree_on_1_and_2_ranks():
-    """The same pocket, the same vent on 1 and 2 ranks, and every rank that holds a node
-    gives it the same component and the same decision."""
+    """The same pocket, the same vent (and the same drained pocket, rim and inner nodes) on 1
+    and 2 ranks, and every rank that holds a node gives it the same component and the same
+    decisions."""
     res = []
     for ranks in (1, 2):
         cmd = [shutil.which("mpirun"), "-n", str(ranks), sys.executable, "-c", MPI_SCRIPT]
@@ -155,3 +181,4 @@ def test_components_and_vents_agree_on_1_and_2_ranks():
     for r in res:
         assert r["components"] == 2 and r["after"] == 1 and r["consistent"] and r["pocket"] > 100
     assert res[0]["pocket"] == res[1]["pocket"] and res[0]["vented"] == res[1]["vented"] > 0
+    assert res[0]["drain"] == res[1]["drain"] and min(res[0]["drain"]) > 0     # drained, rim, inner nodes

@@ -63,6 +63,16 @@ class CouplingConfig:
                                          "would let out), remove the fill — between owners free to part, not the "
                                          "blocks of one bonded structure — around the pocket until it reaches the "
                                          "rest of the fluid again (fcm/pockets.py, docs/coupling.md)")
+    drain_pockets: bool = param(False, doc="hold the pressure of such pockets (vented or not) at the ambient one: "
+                                           "the mean of the surrounding fluid's, moved hydrostatically to each "
+                                           "node, a Dirichlet condition at the pocket's nodes that no cut cell "
+                                           "touches — their water leaves and enters as past the sides of a block of "
+                                           "finite depth in 3D. For 2D runs of blocks narrower than the channel, "
+                                           "where a vent's sub-cell slit otherwise sets the pocket's pressure "
+                                           "(block_overturn: +650 Pa under the sliding block, docs/coupling.md, "
+                                           "session 28). The pocket's water volume is then not conserved in the "
+                                           "plane. With vent_pockets false the fill keeps hiding the underside "
+                                           "near the contacts (the lying block at rest: 0.44 N of lift instead of 3.6 N)")
     min_thickness: float = param(0.0, unit="m", doc="box blocks (and structure blocks) thinner than this are widened "
                                                   "to it in the fluid's level set only (the DEM keeps their true "
                                                   "size): a wall thinner than about one cell falls between the mesh "

@@ -30,6 +30,17 @@ landing, 36 nodes) holds whole cells. A bound on depth does not separate the two
 level is (g − δ)/2 in a gap g, so the landing pocket is only 3.7 mm deep; nor does venting
 only closing gaps (the landing pocket, sealed while the block rebounded, kicked the block
 with 36 kN at 0.924 s; docs/coupling.md, session 24).
+
+A vent leaves the pocket joined to the rest through a slit narrower than a cell, and the flow
+the discrete slit lets through then sets the pocket's pressure: under the 30° block of
+block_overturn lying on the stopper and the floor and sliding at 5–10 cm/s, ≈ 2,000 Pa against
+≈ 1,300 Pa around it (2.9 N of lift on the 10 N block, docs/coupling.md, session 28). With
+``coupling.drain_pockets`` :meth:`PocketVents.drainable` names the pockets as the fill seals
+them and the main fluid's nodes nearest to each (its rim), and the coupled model holds their
+pressure at the rim's, moved hydrostatically — in 3D that water passes the block's sides.
+The condition goes on the pocket's inner nodes only (:meth:`PocketVents.inner_nodes`), so the
+cut cells keep their continuity equation (pinning every pocket node gave nearly the same loads
+in the sliding test: 3.94 against 3.76 N over 0.05–0.1 s).
 """
 from __future__ import annotations
 
@@ -85,6 +96,7 @@ class PocketVents:
         self._sorted_ids = self.global_ids[self._order]
         self.pocket_nodes = 0          # owned fluid nodes outside the largest component (last check; unvented slivers too)
         self.vented_nodes = 0          # owned nodes whose fill was removed (last call)
+        self.drained_nodes = 0         # owned nodes of the pockets held at the ambient pressure (last call)
 
     def components(self, fluid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Global component id (n,) of every fluid node (−1 elsewhere), the same on every rank
@@ -150,6 +162,59 @@ class PocketVents:
             reverted |= revert
         self.vented_nodes = self.comm.allreduce(int(np.count_nonzero(reverted & self.owned)))
         return reverted
+
+    def drainable(self, level: np.ndarray, ventable: np.ndarray, combine,
+                  max_layers: int = 4) -> tuple[np.ndarray, np.ndarray]:
+        """The pockets that ``coupling.drain_pockets`` holds at the ambient pressure, and where
+        that pressure is read: ``level`` (n,) the level set with the fill (unchanged),
+        ``ventable`` and ``combine`` as in :meth:`vent`. A pocket qualifies as for a vent: it
+        holds a whole cell and touches fill between owners free to part. Returns ``pocket``
+        (n,) int, the index k = 0, 1, … of the drained pocket each node is in (−1 elsewhere,
+        the same on every rank), and ``rim`` (n,) int, k on the nodes of the main fluid (the
+        largest component) that the first of up to ``max_layers`` cell layers grown from
+        pocket k reaches (−1 elsewhere). Collective."""
+        n = len(level)
+        pocket, rim = np.full(n, -1, np.int64), np.full(n, -1, np.int64)
+        label, size = self.components(level > 0)
+        self.pocket_nodes = int(size.sum() - size.max()) if np.count_nonzero(size) > 1 else 0
+        self.drained_nodes = 0
+        if np.count_nonzero(size) <= 1:
+            return pocket, rim
+        big = int(np.argmax(size))
+        resolved = self.whole_cells(label, len(size)) > 0
+        resolved[big] = False
+        k = 0
+        for c in np.flatnonzero(resolved):
+            inside = label == c
+            near = self._cell_neighbours(inside)
+            if not self.comm.allreduce(bool((near & ventable & (level <= 0)).any()), op=MPI.LOR):
+                continue               # sealed by mortar or by owners that cannot part
+            pocket[inside] = k
+            grown = inside
+            for _ in range(max_layers):
+                grown = combine(self._cell_neighbours(grown))
+                ring = grown & (label == big)
+                if self.comm.allreduce(bool(ring.any()), op=MPI.LOR):
+                    rim[ring & (rim < 0)] = k
+                    break
+            k += 1
+        self.drained_nodes = self.comm.allreduce(int(np.count_nonzero((pocket >= 0) & self.owned)))
+        return pocket, rim
+
+    def inner_nodes(self, pocket: np.ndarray, combine) -> np.ndarray:
+        """Nodes (n,) bool of the drained pockets whose every cell lies in the same pocket (no
+        cut cell touches them), from ``pocket`` of :meth:`drainable`. Collective."""
+        lab = pocket[self.cells]
+        whole = np.all(lab == lab[:, :1], axis=1) & (lab[:, 0] >= 0)
+        touched = np.zeros(len(pocket), bool)
+        touched[self.cells[~whole].ravel()] = True
+        return (pocket >= 0) & ~combine(touched)
+
+    def _cell_neighbours(self, flags: np.ndarray) -> np.ndarray:
+        """``flags`` and the nodes that share a cell with a flagged node (this rank's cells)."""
+        out = flags.copy()
+        out[self.cells[flags[self.cells].any(axis=1)].ravel()] = True
+        return out
 
     def whole_cells(self, label: np.ndarray, ncomp: int) -> np.ndarray:
         """Number (ncomp,) of the cells whose nodes all belong to each component, summed over the
