@@ -41,6 +41,10 @@ def test_coupled_input_errors_name_the_keys():
     data["dem"]["gravity"] = [0.0, 0.0, -9.81]
     with pytest.raises(ConfigError, match="fluid.gravity.*dem.gravity"):
         case_from_dict(data)
+    data = coarse_case()
+    data["coupling"].update(drain_pockets=True, gap_fill=0.0)
+    with pytest.raises(ConfigError, match="coupling.drain_pockets.*coupling.gap_fill"):
+        case_from_dict(data)
 
 
 def test_floating_box_exchanges_momentum_and_restarts(tmp_path):

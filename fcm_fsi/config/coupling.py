@@ -118,6 +118,9 @@ class CouplingConfig:
                                                     "many fluid steps", ge=1)
 
     def __post_init__(self) -> None:
+        if self.drain_pockets and self.gap_fill == 0:
+            raise ConfigError("key 'coupling.drain_pockets' = true needs the gap fill that seals the pockets: "
+                              "'coupling.gap_fill' > 0 or unset (one cell)")
         if self.wall_slip and self.wall == "nitsche":
             raise ConfigError("key 'coupling.wall_slip' = true needs 'coupling.wall' 'penalty' or 'pressure' "
                               "(the Nitsche terms are no-slip)")
