@@ -67,6 +67,11 @@ def fluid_components(cells: np.ndarray, fluid: np.ndarray) -> np.ndarray:
     return np.where(fluid, label, -1)
 
 
+def _one_label(lab: np.ndarray) -> np.ndarray:
+    """Per cell (rows of its nodes' labels): all its nodes carry the same label ≥ 0."""
+    return np.all(lab == lab[:, :1], axis=1) & (lab[:, 0] >= 0)
+
+
 def _roots(parent: np.ndarray) -> np.ndarray:
     """Root of every entry of a union-find forest (``parent`` of roots is themselves)."""
     root = parent.copy()
@@ -149,9 +154,7 @@ class PocketVents:
             pocket = fluid & resolved[np.maximum(label, 0)]
             if not self.comm.allreduce(bool(pocket.any()), op=MPI.LOR):
                 break
-            touching = np.zeros(len(level), bool)
-            touching[self.cells[pocket[self.cells].any(axis=1)].ravel()] = True
-            candidate = touching & ventable & (level <= 0)
+            candidate = self._cell_neighbours(pocket) & ventable & (level <= 0)
             if not self.comm.allreduce(bool(candidate.any()), op=MPI.LOR):
                 break
             plain = plain_level()
@@ -204,8 +207,7 @@ class PocketVents:
     def inner_nodes(self, pocket: np.ndarray, combine) -> np.ndarray:
         """Nodes (n,) bool of the drained pockets whose every cell lies in the same pocket (no
         cut cell touches them), from ``pocket`` of :meth:`drainable`. Collective."""
-        lab = pocket[self.cells]
-        whole = np.all(lab == lab[:, :1], axis=1) & (lab[:, 0] >= 0)
+        whole = _one_label(pocket[self.cells])
         touched = np.zeros(len(pocket), bool)
         touched[self.cells[~whole].ravel()] = True
         return (pocket >= 0) & ~combine(touched)
@@ -220,7 +222,7 @@ class PocketVents:
         """Number (ncomp,) of the cells whose nodes all belong to each component, summed over the
         ranks' own cells (collective)."""
         lab = label[self.cells[: self.owned_cells]]
-        whole = np.all(lab == lab[:, :1], axis=1) & (lab[:, 0] >= 0)
+        whole = _one_label(lab)
         count = np.bincount(lab[whole, 0], minlength=ncomp).astype(np.int64)
         self.comm.Allreduce(MPI.IN_PLACE, count, op=MPI.SUM)
         return count
