@@ -318,7 +318,35 @@ class CutDomain:
         [N m] on each body from the NS state the wall term was built with. Collective; same on all ranks."""
         if self._force_forms is None:
             self._build_force_forms()
-        fF, fM, dofs_f, dofs_m = self._force_forms
+        return self._assembled_loads(self._force_forms, nbodies, centres)
+
+    def pressure_load(self, nbodies: int, centres: np.ndarray, pressure, weight) -> tuple[np.ndarray, np.ndarray]:
+        """−∫_Γ w p n dΓ per body [N; N/m in 2D] and its torque about ``centres`` [N m], n = ∇s/|∇s|
+        the structure's outward normal, cells split over the bodies as in :meth:`body_forces`;
+        ``pressure`` and ``weight`` UFL expressions (forms compiled once per pair). Collective."""
+        key = (id(pressure), id(weight))
+        if getattr(self, "_pressure_key", None) != key:
+            x = ufl.SpatialCoordinate(self.mesh)
+            grad_s = ufl.grad(self.level_set)
+            n = grad_s / ufl.sqrt(ufl.dot(grad_s, grad_s) + 1e-30)
+            f = -weight * pressure * n
+            V0 = fem.VectorFunctionSpace(self.mesh, ("DG", 0))
+            v0 = ufl.TestFunction(V0)
+            force = fem.form(ufl.inner(f, v0) * self.dGamma)
+            if self.gdim == 2:
+                S0 = fem.FunctionSpace(self.mesh, ("DG", 0))
+                moment = fem.form((x[0] * f[1] - x[1] * f[0]) * ufl.TestFunction(S0) * self.dGamma)
+                dofs_m = S0.dofmap.list.array
+            else:
+                moment = fem.form(ufl.inner(ufl.cross(x, f), v0) * self.dGamma)
+                dofs_m = V0.dofmap.list.array
+            self._pressure_forms = (force, moment, V0.dofmap.list.array, dofs_m)
+            self._pressure_key, self._pressure_refs = key, (pressure, weight)   # the refs keep id() unique
+        return self._assembled_loads(self._pressure_forms, nbodies, centres)
+
+    def _assembled_loads(self, forms, nbodies: int, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per-body force and torque of cell-wise (DG0) force and moment forms."""
+        fF, fM, dofs_f, dofs_m = forms
         own = self.n_owned
         vf = fem.petsc.assemble_vector(fF)      # no ghost accumulation: DG0 dofs are cell-local
         vm = fem.petsc.assemble_vector(fM)
@@ -326,6 +354,11 @@ class CutDomain:
         force = self._to_bodies(vf.array.reshape(-1, self.gdim)[dofs_f[:own]], nbodies)
         moment = self._to_bodies(vm.array.reshape(-1, nm)[dofs_m[:own]], nbodies)
         vf.destroy(), vm.destroy()
+        return self._force_and_torque(force, moment, nbodies, centres)
+
+    def _force_and_torque(self, force: np.ndarray, moment: np.ndarray, nbodies: int,
+                          centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Summed over the ranks; the moment about the origin moved to ``centres``."""
         force = self.comm.allreduce(force, op=MPI.SUM)
         moment = self.comm.allreduce(moment, op=MPI.SUM)
         c = np.asarray(centres, dtype=float).reshape(nbodies, -1)

@@ -53,7 +53,8 @@ from ..config.loader import ConfigError
 from ..coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thickness, fluid_volume_ratio, gap_walls,
                                  shapes_of_blocks)
 from ..dem.model import build_system
-from ..fcm.domain import CutDomain
+from ..fcm.domain import CutDomain, cut_cells
+from ..fcm.hidden import NOT_CUT, HiddenSurface
 from ..fcm.levelset import NO_SHAPE, StructureLevelSet
 from ..fcm.pockets import PocketVents
 from ..fluid.solvers import LinearSolveError
@@ -137,6 +138,28 @@ class CoupledModel:
             if cp.drain_pockets:
                 self._q_of_node = self.cut.node_map(self.ns.Q)          # mesh vertex → pressure node
                 self._p_pocket = fem.Function(self.ns.Q, name="p_pocket")
+        self.hidden = None                 # coupling.hidden_pressure (fcm/hidden.py)
+        self.hidden_force, self.hidden_torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
+        self.fill_force, self.fill_torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
+        if cp.hidden_pressure:
+            if self.gdim != 2:
+                raise ConfigError("key 'coupling.hidden_pressure' = true: implemented for 2D fluids only "
+                                  "(this mesh is 3D); set it to false")
+            if self.gap <= 0:
+                raise ConfigError("key 'coupling.hidden_pressure' = true needs the gap fill whose inside it "
+                                  "loads: 'coupling.gap_fill' > 0 or unset (one cell)")
+            try:
+                self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb, ~st.fixed, self.h_min / 16)
+            except ValueError as err:
+                raise ConfigError(f"key 'coupling.hidden_pressure' = true: {err}") from None
+            self._p_total = fem.Function(self.ns.Q, name="p_total")
+            self._rho_node = fem.Function(self.cut.S1, name="rho_node")
+            self._fillness = fem.Function(self.cut.S1, name="fillness")
+            # the fill's part of Γ: where the fill (or a neighbour) sets the level set
+            self._fill_eps = 1e-6 * self.h_min   # [m] above round-off of the two level sets' difference
+            self._fill_weight = ufl.conditional(ufl.gt(self._fillness, self._fill_eps), 1.0, 0.0)
+            if not hasattr(self, "_plain_levelset"):
+                self._plain_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band)
         self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
         nv = self.ns.V.dofmap.index_map.size_local + self.ns.V.dofmap.index_map.num_ghosts
         self.v_fluid = np.ones(nv, bool)
@@ -165,6 +188,8 @@ class CoupledModel:
             for key, unit in (("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"),
                               ("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s")):
                 self.series_units[f"b{b}_{key}"] = unit
+        if self.hidden is not None:
+            self.series_units.update({"hidden_force_x": "N", "hidden_force_y": "N", "hidden_length": "m"})
         self._water_forms = None
         if case.phase_field is not None:
             # liquid volume [m^d] in the fluid part and inside the blocks (fitted weights): the
@@ -421,9 +446,18 @@ class CoupledModel:
         if fill.any():
             ubar[fill] = self._rigid_velocity(self.points[fill], owner[fill], motion,
                                               self.levelset.fill_other[fill], self.levelset.fill_weight[fill])
+        if self.hidden is not None:
+            # where the fill (or a neighbour) sets the level set: the plain one minus it, > 0
+            plain, _ = self._plain_levelset.evaluate(self.points, st.pos, st.quat)
+            self._fillness.x.array[self.cut.level_dofs] = np.maximum(plain - level, 0.0)
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         stats = self.cut.update(level, owner, ubar, share)
+        if self.hidden is not None:
+            cut = cut_cells(level[self.cut.geom_cells])
+            self._cut_owner = np.column_stack([np.where(cut, self.cut.cell_owner, NOT_CUT),
+                                               np.where(cut & (self.cut.cell_share > 0), self.cut.cell_second,
+                                                        NOT_CUT)])
         if self._advective_dofs is not None:
             # φ in advective form on the cells at and inside the blocks (phase_field_residual)
             cells = self.cut.body_cells if self._pocket_cells is None else self.cut.body_cells | self._pocket_cells
@@ -721,7 +755,10 @@ class CoupledModel:
             else:
                 log.debug("t = %.6g s: coupling iteration not converged after %d passes (residual %.2e)",
                           t, cp.iterations, self.iteration_residual)
-        self.exchange_error = self._exchange_error(dt, F - self.force, fluid_side)
+        # coupling.hidden_pressure: the hidden-surface load is not the fluid's (its reaction is the floor's)
+        # and the fill's surface load (the fluid's) is not the block's: the check compares the fluid's own
+        fluid_load = self.force - self.hidden_force + self.fill_force
+        self.exchange_error = self._exchange_error(dt, F - fluid_load, fluid_side)
         self._check_dem(t + dt)
         if self.ns.step_count % self.case.coupling.check_every == 0:
             self.dem.check_replicated(self.comm)
@@ -739,6 +776,10 @@ class CoupledModel:
             self.force[:] = 0.0
             self.force[:, : self.gdim] = force * self.depth
             self.torque[:] = torque * self.depth
+            if self.hidden is not None:
+                self._hidden_load(centres)
+                self.force += self.hidden_force - self.fill_force
+                self.torque += self.hidden_torque - self.fill_torque
             fluid_side = self._wall_momentum()
             self._update_added_mass()
         with timer("dem sub-steps"):
@@ -759,6 +800,28 @@ class CoupledModel:
             self.accel[:] = (v1 - v0) / dt
             self.alpha_ang[:] = (w1 - w0) / dt
         return F, fluid_side
+
+    def _hidden_load(self, centres: np.ndarray) -> None:
+        """``coupling.hidden_pressure`` (fcm/hidden.py), from this step's pressure and cut:
+        the pressure part of the cut load on the fill's surface (``fill_force``, ``fill_torque``:
+        it loads the fill's water, not the block) and the interpolated pressure on the block's
+        hidden surface (``hidden_force``, ``hidden_torque``) [N, N m] per block."""
+        ns, static = self.ns, getattr(self.fluid, "static", None)
+        p = ns.U.x.array[ns.Q_map]
+        self._p_total.x.array[:] = p if static is None else static.total_pressure(p)
+        force, torque = self.cut.pressure_load(self.nb, centres, self._p_total, self._fill_weight)
+        self.fill_force[:] = 0.0
+        self.fill_force[:, : self.gdim] = force * self.depth
+        self.fill_torque[:] = torque * self.depth
+        density = self.case.fluid.density
+        if self.case.phase_field is not None:
+            self._rho_node.x.array[self.cut.level_dofs] = self._node_density()
+            density = self._rho_node
+        st = self.system.state
+        g = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
+        self.hidden_force, self.hidden_torque = self.hidden.load(
+            self.cut.level_set, self._fillness, self._p_total, density, g, self._cut_owner, st.pos,
+            st.rotation_matrices(), self.depth, tol=0.25 * self.h_min, eps=self._fill_eps)
 
     def _block_velocities(self) -> np.ndarray:
         """The iterated unknown [m/s], flattened: per block the V and Ω × radius of gyration of
@@ -862,6 +925,10 @@ class CoupledModel:
                      "pocket_nodes": float(self.vents.pocket_nodes if self.vents else 0),
                      "vented_nodes": float(self.vents.vented_nodes if self.vents else 0),
                      "drained_nodes": float(self.vents.drained_nodes if self.vents else 0)})
+        if self.hidden is not None:
+            diag.update({"hidden_force_x": float(self.hidden_force[:, 0].sum()),
+                         "hidden_force_y": float(self.hidden_force[:, 1].sum()),
+                         "hidden_length": float(self.hidden.hidden_length.sum())})
         total = self.force.sum(axis=0)
         diag.update({"force_x": total[0], "force_y": total[1], "force_z": total[2]})
         for b in range(min(self.nb, SERIES_BLOCKS)):
