@@ -141,18 +141,21 @@ class CoupledModel:
         self.hidden = None                 # coupling.hidden_pressure (fcm/hidden.py)
         self.hidden_force, self.hidden_torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
         self.fill_force, self.fill_torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
-        if cp.hidden_pressure:
+        if cp.hidden_pressure != "none":
+            key = f"key 'coupling.hidden_pressure' = {cp.hidden_pressure}"
             if self.gdim != 2:
-                raise ConfigError("key 'coupling.hidden_pressure' = true: implemented for 2D fluids only "
-                                  "(this mesh is 3D); set it to false")
+                raise ConfigError(f"{key}: implemented for 2D fluids only (this mesh is 3D); set it to none")
             if self.gap <= 0:
-                raise ConfigError("key 'coupling.hidden_pressure' = true needs the gap fill whose inside it "
-                                  "loads: 'coupling.gap_fill' > 0 or unset (one cell)")
+                raise ConfigError(f"{key} needs the gap fill whose inside it loads: 'coupling.gap_fill' > 0 or "
+                                  "unset (one cell)")
             try:
                 self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb, ~st.fixed, self.h_min / 16)
             except ValueError as err:
-                raise ConfigError(f"key 'coupling.hidden_pressure' = true: {err}") from None
+                raise ConfigError(f"{key}: {err}") from None
             self._p_total = fem.Function(self.ns.Q, name="p_total")
+            self._static_for_hidden = None
+            if cp.hidden_pressure == "hydrostatic":
+                self._static_for_hidden = self._hydrostatic_pressure(case)
             self._rho_node = fem.Function(self.cut.S1, name="rho_node")
             self._fillness = fem.Function(self.cut.S1, name="fillness")
             # the fill's part of Γ: where the fill (or a neighbour) sets the level set
@@ -801,14 +804,35 @@ class CoupledModel:
             self.alpha_ang[:] = (w1 - w0) / dt
         return F, fluid_side
 
+    def _hydrostatic_pressure(self, case: Case):
+        """The static pressure Π (fluid/hydrostatic.py) of ``coupling.hidden_pressure:
+        hydrostatic``: the fluid's own when it is well balanced, else one solved for the
+        closure only (its P2 matrix factorised once; one solve per step)."""
+        from ..fluid.hydrostatic import StaticPressure, static_pressure_space
+        own = getattr(self.fluid, "static", None)
+        if own is not None:
+            return own
+        g = np.asarray((tuple(case.fluid.gravity) + (0.0,) * 3)[: self.gdim], float)
+        rho = getattr(self.fluid, "rho", None)
+        if rho is None:
+            rho = fem.Constant(self.mesh, PETSc.ScalarType(case.fluid.density))
+        Pi = fem.Function(static_pressure_space(self.mesh), name="p_static_hidden")
+        return StaticPressure(self.ns, Pi, rho, g)
+
     def _hidden_load(self, centres: np.ndarray) -> None:
         """``coupling.hidden_pressure`` (fcm/hidden.py), from this step's pressure and cut:
         the pressure part of the cut load on the fill's surface (``fill_force``, ``fill_torque``:
         it loads the fill's water, not the block) and the interpolated pressure on the block's
-        hidden surface (``hidden_force``, ``hidden_torque``) [N, N m] per block."""
+        hidden surface (``hidden_force``, ``hidden_torque``) [N, N m] per block; with
+        ``hydrostatic`` both from the static pressure Π instead of the whole pressure."""
         ns, static = self.ns, getattr(self.fluid, "static", None)
-        p = ns.U.x.array[ns.Q_map]
-        self._p_total.x.array[:] = p if static is None else static.total_pressure(p)
+        if self._static_for_hidden is not None:
+            if self._static_for_hidden is not static:     # the fluid's own is solved in its step
+                self._static_for_hidden.update()
+            self._p_total.x.array[:] = self._static_for_hidden.p1.x.array
+        else:
+            p = ns.U.x.array[ns.Q_map]
+            self._p_total.x.array[:] = p if static is None else static.total_pressure(p)
         force, torque = self.cut.pressure_load(self.nb, centres, self._p_total, self._fill_weight)
         self.fill_force[:] = 0.0
         self.fill_force[:, : self.gdim] = force * self.depth
