@@ -82,15 +82,20 @@ def test_floating_box_exchanges_momentum_and_restarts(tmp_path):
     np.testing.assert_allclose(bh["y"], bf["y"], rtol=0, atol=1e-12)
 
 
-@pytest.mark.mpi
-def test_one_and_two_ranks_agree(tmp_path):
+def series_on_one_and_two_ranks(data: dict, tmp_path) -> tuple[dict, dict]:
+    """series.csv of the case ``data`` run through the CLI on 1 and on 2 ranks."""
     case = tmp_path / "case.yaml"
-    case.write_text(yaml.safe_dump(coarse_case(0.03)))
+    case.write_text(yaml.safe_dump(data))
     one = run_cli([str(case), "--output", str(tmp_path / "one")])
     two = run_cli([str(case), "--output", str(tmp_path / "two")], np_=2)
     assert one.returncode == 0, one.stderr[-2000:]
     assert two.returncode == 0, two.stderr[-2000:]
-    a, b = read(tmp_path / "one" / "series.csv"), read(tmp_path / "two" / "series.csv")
+    return read(tmp_path / "one" / "series.csv"), read(tmp_path / "two" / "series.csv")
+
+
+@pytest.mark.mpi
+def test_one_and_two_ranks_agree(tmp_path):
+    a, b = series_on_one_and_two_ranks(coarse_case(0.03), tmp_path)
     # same DEM on every rank; the fluid differs only by solver round-off between partitions
     assert np.abs(a["b0_y"] - b["b0_y"]).max() < 1e-9
     assert np.abs(a["force_y"] - b["force_y"]).max() < 1e-6 * np.abs(a["force_y"]).max()
@@ -411,12 +416,6 @@ def test_a_drained_pocket_is_the_same_on_one_and_two_ranks(tmp_path):
     solver round-off (measured: 4e-9 N of 3.6 N over 0.06 s)."""
     data = sliding_pocket_case(0.05, True)
     data["run"]["t_end"] = 0.02
-    case = tmp_path / "case.yaml"
-    case.write_text(yaml.safe_dump(data))
-    one = run_cli([str(case), "--output", str(tmp_path / "one")])
-    two = run_cli([str(case), "--output", str(tmp_path / "two")], np_=2)
-    assert one.returncode == 0, one.stderr[-2000:]
-    assert two.returncode == 0, two.stderr[-2000:]
-    a, b = read(tmp_path / "one" / "series.csv"), read(tmp_path / "two" / "series.csv")
+    a, b = series_on_one_and_two_ranks(data, tmp_path)
     assert a["drained_nodes"][1:].min() > 20 and np.array_equal(a["drained_nodes"], b["drained_nodes"])
     assert np.abs(a["force_y"] - b["force_y"]).max() < 1e-6 * np.abs(a["force_y"]).max()

@@ -9,12 +9,12 @@ import pytest
 import yaml
 from mpi4py import MPI
 
-from fcm_fsi.config import ConfigError, case_from_dict
+from fcm_fsi.config import case_from_dict
 from fcm_fsi.fcm.hidden import hidden_pressure, interpolate_hidden, perimeter_samples
 from fcm_fsi.fcm.levelset import BOX, SPHERE
 
 from .conftest import run_cli
-from .test_coupled import read, sliding_pocket_case
+from .test_coupled import series_on_one_and_two_ranks, sliding_pocket_case
 
 RHO, G = 998.2, 9.81
 
@@ -147,15 +147,7 @@ def test_hidden_pressure_is_refused_without_a_gap_fill(tmp_path):
 def test_hidden_pressure_is_the_same_on_one_and_two_ranks(tmp_path):
     """Samples are looked up in owned cells only and summed over the ranks: the wedge's
     hidden load and total load agree on 1 and 2 ranks to solver round-off."""
-    data = resting_block("wedge")
-    data["output"]["xdmf"] = False
-    case = tmp_path / "case.yaml"
-    case.write_text(yaml.safe_dump(data))
-    one = run_cli([str(case), "--output", str(tmp_path / "one")])
-    two = run_cli([str(case), "--output", str(tmp_path / "two")], np_=2)
-    assert one.returncode == 0, one.stderr[-2000:]
-    assert two.returncode == 0, two.stderr[-2000:]
-    a, b = read(tmp_path / "one" / "series.csv"), read(tmp_path / "two" / "series.csv")
+    a, b = series_on_one_and_two_ranks(resting_block("wedge"), tmp_path)
     assert a["hidden_force_y"][1:].min() > 1.0
     np.testing.assert_allclose(a["hidden_length"], b["hidden_length"], rtol=0, atol=1e-12)
     assert np.abs(a["hidden_force_y"] - b["hidden_force_y"]).max() < 1e-6 * np.abs(a["hidden_force_y"]).max()
