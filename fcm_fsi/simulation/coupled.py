@@ -846,6 +846,9 @@ class CoupledModel:
         self.hidden_force, self.hidden_torque = self.hidden.load(
             self.cut.level_set, self._fillness, self._p_total, density, g, self._cut_owner, st.pos,
             st.rotation_matrices(), self.depth, tol=0.25 * self.h_min, eps=self._fill_eps)
+        if self.hidden.unreached:
+            log.debug("hidden pressure: %d block(s) hidden all round (no wetted mouth): no hidden load",
+                      self.hidden.unreached)
 
     def _block_velocities(self) -> np.ndarray:
         """The iterated unknown [m/s], flattened: per block the V and Ω × radius of gyration of
