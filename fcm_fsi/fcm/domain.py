@@ -296,13 +296,18 @@ class CutDomain:
         """Cell-wise traction integrals: F_K = ∫_{Γ∩K} t dΓ and the moment ∫ x × t dΓ,
         t = p̄ (u − ū), as DG0 vectors (assembled, not summed, so bodies can be split)."""
         t = -self.wall_traction(self._parts)
-        x = ufl.SpatialCoordinate(self.mesh)
-        V0 = fem.VectorFunctionSpace(self.mesh, ("DG", 0))
-        v0 = ufl.TestFunction(V0)
         # the extension's Brinkman term acts on the solid part of cut cells: its reaction is load too
         loads = [(t, self.dGamma)]
         if self.extension > 0:
             loads.append((self.extension_traction(self._parts), self.dExt))
+        self._force_forms = self._cellwise_load_forms(loads)
+
+    def _cellwise_load_forms(self, loads):
+        """Compiled DG0 force and moment forms Σ ∫ f · v₀ dm and Σ ∫ (x × f) v₀ dm over the
+        (force density, measure) pairs ``loads``, with their dof lists, for :meth:`_assembled_loads`."""
+        x = ufl.SpatialCoordinate(self.mesh)
+        V0 = fem.VectorFunctionSpace(self.mesh, ("DG", 0))
+        v0 = ufl.TestFunction(V0)
         force = fem.form(sum(ufl.inner(f, v0) * m for f, m in loads))
         if self.gdim == 2:
             S0 = fem.FunctionSpace(self.mesh, ("DG", 0))
@@ -311,7 +316,7 @@ class CutDomain:
         else:
             moment = fem.form(sum(ufl.inner(ufl.cross(x, f), v0) * m for f, m in loads))
             dofs_m = V0.dofmap.list.array
-        self._force_forms = (force, moment, V0.dofmap.list.array, dofs_m)
+        return force, moment, V0.dofmap.list.array, dofs_m
 
     def body_forces(self, nbodies: int, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fluid force (nbodies, gdim) [N; N/m in 2D] and torque about ``centres`` (nbodies, 3)
@@ -321,26 +326,14 @@ class CutDomain:
         return self._assembled_loads(self._force_forms, nbodies, centres)
 
     def pressure_load(self, nbodies: int, centres: np.ndarray, pressure, weight) -> tuple[np.ndarray, np.ndarray]:
-        """−∫_Γ w p n dΓ per body [N; N/m in 2D] and its torque about ``centres`` [N m], n = ∇s/|∇s|
-        the structure's outward normal, cells split over the bodies as in :meth:`body_forces`;
-        ``pressure`` and ``weight`` UFL expressions (forms compiled once per pair). Collective."""
+        """−∫_Γ w p n dΓ per body [N; N/m in 2D] and its torque about ``centres`` [N m], n the
+        structure's outward normal (−:meth:`wall_normal`), cells split over the bodies as in
+        :meth:`body_forces`; ``pressure`` and ``weight`` UFL expressions (forms compiled once per
+        pair). Collective."""
         key = (id(pressure), id(weight))
         if getattr(self, "_pressure_key", None) != key:
-            x = ufl.SpatialCoordinate(self.mesh)
-            grad_s = ufl.grad(self.level_set)
-            n = grad_s / ufl.sqrt(ufl.dot(grad_s, grad_s) + 1e-30)
-            f = -weight * pressure * n
-            V0 = fem.VectorFunctionSpace(self.mesh, ("DG", 0))
-            v0 = ufl.TestFunction(V0)
-            force = fem.form(ufl.inner(f, v0) * self.dGamma)
-            if self.gdim == 2:
-                S0 = fem.FunctionSpace(self.mesh, ("DG", 0))
-                moment = fem.form((x[0] * f[1] - x[1] * f[0]) * ufl.TestFunction(S0) * self.dGamma)
-                dofs_m = S0.dofmap.list.array
-            else:
-                moment = fem.form(ufl.inner(ufl.cross(x, f), v0) * self.dGamma)
-                dofs_m = V0.dofmap.list.array
-            self._pressure_forms = (force, moment, V0.dofmap.list.array, dofs_m)
+            # −w p n out of the structure = w p × the wall normal (out of the fluid)
+            self._pressure_forms = self._cellwise_load_forms([(weight * pressure * self.wall_normal(), self.dGamma)])
             self._pressure_key, self._pressure_refs = key, (pressure, weight)   # the refs keep id() unique
         return self._assembled_loads(self._pressure_forms, nbodies, centres)
 

@@ -129,6 +129,7 @@ class CoupledModel:
         self._pocket_cells = None          # cells of the drained pockets (coupling.drain_pockets)
         self._phi_of_node = None           # phase-field dof at each mesh vertex (built on first use)
         self._base_bcs = list(self.ns.bcs)
+        self._plain_levelset = None        # the level set without the fill (vents, hidden pressure)
         if self.gap > 0 and (cp.vent_pockets or cp.drain_pockets):
             imap, dofs = self.cut.S1.dofmap.index_map, self.cut.level_dofs
             self.vents = PocketVents(comm, self.cut.geom_cells, imap.local_to_global(dofs.astype(np.int32)),
@@ -152,7 +153,6 @@ class CoupledModel:
                 self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb, ~st.fixed, self.h_min / 16)
             except ValueError as err:
                 raise ConfigError(f"{key}: {err}") from None
-            self._p_total = fem.Function(self.ns.Q, name="p_total")
             self._static_for_hidden = None
             if cp.hidden_pressure == "hydrostatic":
                 self._static_for_hidden = self._hydrostatic_pressure(case)
@@ -161,7 +161,7 @@ class CoupledModel:
             # the fill's part of Γ: where the fill (or a neighbour) sets the level set
             self._fill_eps = 1e-6 * self.h_min   # [m] above round-off of the two level sets' difference
             self._fill_weight = ufl.conditional(ufl.gt(self._fillness, self._fill_eps), 1.0, 0.0)
-            if not hasattr(self, "_plain_levelset"):
+            if self._plain_levelset is None:
                 self._plain_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band)
         self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
         nv = self.ns.V.dofmap.index_map.size_local + self.ns.V.dofmap.index_map.num_ghosts
@@ -825,15 +825,12 @@ class CoupledModel:
         it loads the fill's water, not the block) and the interpolated pressure on the block's
         hidden surface (``hidden_force``, ``hidden_torque``) [N, N m] per block; with
         ``hydrostatic`` both from the static pressure Π instead of the whole pressure."""
-        ns, static = self.ns, getattr(self.fluid, "static", None)
+        pressure = self.fluid.p_out                        # this step's total pressure (P1)
         if self._static_for_hidden is not None:
-            if self._static_for_hidden is not static:     # the fluid's own is solved in its step
-                self._static_for_hidden.update()
-            self._p_total.x.array[:] = self._static_for_hidden.p1.x.array
-        else:
-            p = ns.U.x.array[ns.Q_map]
-            self._p_total.x.array[:] = p if static is None else static.total_pressure(p)
-        force, torque = self.cut.pressure_load(self.nb, centres, self._p_total, self._fill_weight)
+            if self._static_for_hidden is not getattr(self.fluid, "static", None):   # the fluid's own is solved
+                self._static_for_hidden.update()                                   # in its step
+            pressure = self._static_for_hidden.p1
+        force, torque = self.cut.pressure_load(self.nb, centres, pressure, self._fill_weight)
         self.fill_force[:] = 0.0
         self.fill_force[:, : self.gdim] = force * self.depth
         self.fill_torque[:] = torque * self.depth
@@ -844,7 +841,7 @@ class CoupledModel:
         st = self.system.state
         g = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
         self.hidden_force, self.hidden_torque = self.hidden.load(
-            self.cut.level_set, self._fillness, self._p_total, density, g, self._cut_owner, st.pos,
+            self.cut.level_set, self._fillness, pressure, density, g, self._cut_owner, st.pos,
             st.rotation_matrices(), self.depth, tol=0.25 * self.h_min, eps=self._fill_eps)
         if self.hidden.unreached:
             log.debug("hidden pressure: %d block(s) hidden all round (no wetted mouth): no hidden load",
