@@ -145,9 +145,10 @@ def main(argv: list[str] | None = None) -> int:
         write_report(args.out, args.report)
         return 0
     if args.list or not args.name:
+        width = max(map(len, cases))
         for name in sorted(cases):
             c = cases[name]
-            print(f"{name:<24} issue #{c.issue:<3} {c.description}")
+            print(f"{name:<{width}} issue #{c.issue:<3} {c.description}")
         return 0
     names = sorted(cases) if args.name == "all" else [args.name]
     ok = True

@@ -16,6 +16,7 @@ from ...dem.bodies import rotate
 from ...dem.builder import assemble
 from ...dem.cohesive import CohesiveLaw, shape_g
 from ...dem.state import quat_to_matrix_np
+from ...dem.strength import section_capacity
 from ...io.csv import TimeSeriesCSV
 from ...io.logging import get_logger
 from ..registry import at_most, register, rel_error_metric, report_only
@@ -265,30 +266,6 @@ class PointSprings:
                                                 self.rb, self.e, self.k, self.unilateral,
                                                 force, torque,
                                                 self.tension)
-
-
-def section_capacity(b: float, h: float, law: CohesiveLaw, n: int = 20000) -> float:
-    """Ultimate moment [N m] of a b × h joint between rigid blocks under zero axial force.
-
-    Plane sections (openings linear over the face, exact for rigid blocks), tension by
-    eq 28, compression by the penalty k_pen = penalty_factor·k0; for each relative rotation
-    θ the neutral axis z_n solves N = 0 (N is monotonic in z_n), and M_u = max_θ M(θ).
-    Continuum integral (midpoint rule, ``n`` strips), independent of the DEM kernels."""
-    from scipy.optimize import brentq
-    z = (np.arange(n) + 0.5) * h / n          # height above the tension face
-    k_pen = law.penalty_factor * law.k0
-
-    def stress(theta, zn):
-        d = theta * (zn - z)                  # opening > 0 below the neutral axis
-        return np.where(d > 0, law.sigma_c * shape_g(d / law.delta_f), k_pen * d)
-
-    best = 0.0
-    for theta in np.geomspace(1e-4, 50.0, 600) * law.delta_f / h:
-        if stress(theta, h).sum() <= 0.0:     # tension side fully broken
-            break
-        zn = brentq(lambda zn: stress(theta, zn).sum(), 0.0, h, xtol=1e-14 * h)
-        best = max(best, float(np.sum(stress(theta, zn) * (h / 2 - z)) * b * h / n))
-    return best
 
 
 def three_point_bending(n_blocks: int, ell: float, b: float, h: float, mode: str,
