@@ -13,6 +13,11 @@ line of storey 0, columns not included; NaN when no bond broke).
 Reported too: ``back_wall_fails_after_front`` (1 when a back-wall (x-max) bond breaks after the
 front wall's first — the paper's sequence; 0 when not; NaN when no bond broke) and the whole
 sequence, member by member, in ``failure_sequence.csv`` (:mod:`fcm_fsi.dem.failure_sequence`).
+
+``tsunami_building_concrete`` runs the same case with σ_c identified as the paper did for C30
+concrete (:mod:`fcm_fsi.dem.strength`, 2.11e6 Pa instead of the paper's 1e7, which our joints
+turn into 4.7 × C30's flexural strength) and requires ``back_wall_fails_after_front`` at the
+full level (docs/tsunami.md, session 30).
 """
 from __future__ import annotations
 
