@@ -89,9 +89,17 @@ def mc2010_flexural_strength(fck: float, depth: float) -> float:
 class Identification:
     bending_factor: float      # c = M_u/(σ_c W) of the case's joint law
     sigma_c_case: float        # [Pa] the case's σ_c
-    flexural_case: float       # [Pa] c·σ_c: the flexural strength the case's joints give a member
     flexural_target: float     # [Pa] the concrete's flexural strength
-    sigma_c_identified: float  # [Pa] f_fl/c: σ_c that gives our column the concrete's peak reaction
+
+    @property
+    def flexural_case(self) -> float:
+        """c·σ_c [Pa]: the flexural strength the case's joints give a member."""
+        return self.bending_factor * self.sigma_c_case
+
+    @property
+    def sigma_c_identified(self) -> float:
+        """f_fl/c [Pa]: the σ_c that gives our column the concrete's peak reaction."""
+        return self.flexural_target / self.bending_factor
 
     @property
     def strength_ratio(self) -> float:
@@ -104,9 +112,28 @@ def identify(law: CohesiveLaw, flexural_strength: float) -> Identification:
     strength ``flexural_strength`` [Pa] (the paper's identification, §4(4))."""
     if not flexural_strength > 0:
         raise ConfigError(f"flexural strength {flexural_strength} Pa: must be > 0")
-    c = joint_bending_factor(law)
-    return Identification(bending_factor=c, sigma_c_case=law.sigma_c, flexural_case=c * law.sigma_c,
-                          flexural_target=flexural_strength, sigma_c_identified=flexural_strength / c)
+    return Identification(bending_factor=joint_bending_factor(law), sigma_c_case=law.sigma_c,
+                          flexural_target=flexural_strength)
+
+
+def identify_concrete(case, fck: float, depth: float | None = None) -> tuple[Identification, float]:
+    """:func:`identify` for the case's bond law against plain concrete of ``fck`` [Pa] (fib
+    MC2010 flexural strength of a member ``depth`` [m] deep, default the depth of the case's
+    column along x). Returns the identification and the depth used; ConfigError when the case
+    has no bonds, or no structure and no depth."""
+    law = bond_law(case)
+    if depth is None:
+        if case.dem.structure is None:
+            raise ConfigError("no dem.structure: give the member depth (--depth)")
+        depth = case.dem.structure.column[0]
+    return identify(law, mc2010_flexural_strength(fck, depth)), depth
+
+
+def bond_law(case) -> CohesiveLaw:
+    """The case's cohesive law; ConfigError when it has none."""
+    if case.dem is None or case.dem.cohesive is None:
+        raise ConfigError("has no dem.cohesive (nothing to identify)")
+    return CohesiveLaw.from_config(case.dem.cohesive)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -120,26 +147,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--depth", type=float, help="member depth [m] for MC2010's size effect (default: the column's x size)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="case overrides")
     args = ap.parse_args(argv)
+    from ..config import load_case
     try:
-        from ..config import load_case
         case = load_case(args.case, args.set)
-        if case.dem is None or case.dem.cohesive is None:
-            raise ConfigError(f"{args.case}: has no dem.cohesive (nothing to identify)")
-        law = CohesiveLaw.from_config(case.dem.cohesive)
-        if args.fck is not None:
-            depth = args.depth
-            if depth is None:
-                if case.dem.structure is None:
-                    raise ConfigError(f"{args.case}: no dem.structure; give the member depth with --depth")
-                depth = case.dem.structure.column[0]
-            target = mc2010_flexural_strength(args.fck * 1e6, depth)
-            source = f"fib MC2010, f_ck {args.fck:g} MPa, depth {depth:g} m"
-        else:
-            target, source = args.flexural_strength * 1e6, "given"
-        r = identify(law, target)
     except ConfigError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    try:
+        if args.fck is not None:
+            r, depth = identify_concrete(case, args.fck * 1e6, args.depth)
+            source = f"fib MC2010, f_ck {args.fck:g} MPa, depth {depth:g} m"
+        else:
+            r, source = identify(bond_law(case), args.flexural_strength * 1e6), "given"
+    except ConfigError as err:
+        print(f"error: {args.case}: {err}", file=sys.stderr)
+        return 2
+    law = case.dem.cohesive
     print(f"joint law: sigma_c {r.sigma_c_case:.4g} Pa, delta_f {law.delta_f:g} m, penalty_factor {law.penalty_factor:g}")
     print(f"joint bending strength M_u = {r.bending_factor:.4f} sigma_c W")
     print(f"flexural strength of a member with the case's joints: {r.flexural_case / 1e6:.3f} MPa")

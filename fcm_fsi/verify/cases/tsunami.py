@@ -95,11 +95,8 @@ def concrete_sigma_c(data: dict) -> float:
     """σ_c identified as in the paper (§4(4), :mod:`fcm_fsi.dem.strength`): a column joint's
     bending strength equal to the flexural strength of plain C30 concrete as deep as the
     case's column (fib MC2010)."""
-    from ...dem.cohesive import CohesiveLaw
-    from ...dem.strength import identify, mc2010_flexural_strength
-    case = case_from_dict(data, source=data["name"])
-    target = mc2010_flexural_strength(CONCRETE_FCK, case.dem.structure.column[0])
-    return identify(CohesiveLaw.from_config(case.dem.cohesive), target).sigma_c_identified
+    from ...dem.strength import identify_concrete
+    return identify_concrete(case_from_dict(data, source=data["name"]), CONCRETE_FCK)[0].sigma_c_identified
 
 
 @register("tsunami_building_concrete", "tsunami_building with σ_c identified for our joints as the paper "
