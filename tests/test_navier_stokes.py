@@ -324,3 +324,47 @@ def test_lu_kept_over_time_steps_as_gmres_preconditioner_gives_the_same_flow():
     assert its_kept > its_fresh                    # paid for with Krylov iterations
     diff = np.abs(kept.U.x.array - fresh.U.x.array).max()
     assert diff < 1e-6 * np.abs(fresh.U.x.array).max()
+
+
+def test_warm_start_retakes_a_step_to_the_same_flow_with_kept_jacobian():
+    """``NavierStokes.warm_start`` (the coupling's later passes): a step taken again from the
+    converged flow is accepted without a solve; one taken again from a perturbed flow converges
+    to the cold start's flow (to the Newton tolerance) on the kept factorisation and Jacobian
+    (chord steps: no Jacobian assembled, no new factorisation)."""
+    from fcm_fsi.mesh.channel import box
+    tm = box(MPI.COMM_WORLD, n=(5, 5, 5))
+    cfg = FluidConfig(density=1.0, viscosity=0.01, rtol=1e-9, atol=1e-12, startup_steps=0,
+                      petsc={"ksp_type": "gmres", "pc_type": "lu", "ksp_rtol": 1e-11}, boundaries=(
+                          BoundaryCondition(boundary="left", kind="parabolic_inflow", max_speed=1.0),
+                          BoundaryCondition(boundary="right", kind="do_nothing"),
+                          *(BoundaryCondition(boundary=b, kind="no_slip") for b in ("bottom", "top", "front", "back"))))
+    ns = NavierStokes(tm.mesh, cfg, 0.1, facet_tags=tm.facet_tags, boundary_names=tm.names)
+    ns.step()
+    start = (ns.U.x.array.copy(), ns.U_n.x.array.copy(), ns.u_nm1.x.array.copy(), ns.t, ns.step_count)
+
+    def restore():
+        ns.U.x.array[:], ns.U_n.x.array[:], ns.u_nm1.x.array[:], ns.t, ns.step_count = (
+            start[0].copy(), start[1].copy(), start[2].copy(), start[3], start[4])
+
+    cold = ns.step()
+    solution = ns.U.x.array.copy()
+    assert cold.iterations >= 2
+    restore()
+    ns.warm_start(solution)
+    assert ns.step().iterations == 0                       # the converged flow meets the rule already
+    np.testing.assert_array_equal(ns.U.x.array, solution)
+
+    built = ns._preconditioner_built
+    jacobians = []
+    original = ns._assemble_jacobian
+    ns._assemble_jacobian = lambda: (jacobians.append(1), original())
+    restore()
+    rng = np.random.default_rng(1)
+    ns.warm_start(solution * (1 + 1e-3 * rng.standard_normal(solution.shape)))
+    info = ns.step()
+    assert info.iterations >= 1
+    assert not jacobians                                   # chord steps on the kept Jacobian
+    assert ns._preconditioner_built == built               # and the kept factorisation
+    scale = np.abs(solution).max()
+    assert np.abs(ns.U.x.array - solution).max() < 1e-6 * scale
+    assert info.residuals[-1] <= cfg.rtol * cold.residuals[0] * 1.0001 or info.residuals[-1] <= cfg.atol

@@ -67,22 +67,27 @@ def test_identified_sigma_c_gives_the_target_strength():
 
 def test_cli_reports_the_identification_and_refuses_a_case_without_bonds(capsys):
     assert main(["cases/tsunami_building.yaml", "--fck", "30"]) == 0
-    out = capsys.readouterr().out
-    assert "identified sigma_c = 2.112e+06 Pa" in out and "4.74 x stronger" in out
-    assert main(["cases/tsunami_building.yaml", "--flexural-strength", "17.164"]) == 0
+    out = capsys.readouterr().out              # the case carries the identified σ_c (session 31)
+    assert "identified sigma_c = 2.112e+06 Pa" in out and "1.00 x stronger" in out
+    assert main(["cases/tsunami_building.yaml", "--flexural-strength", "3.625"]) == 0
     assert "1.00 x stronger" in capsys.readouterr().out
+    assert main(["cases/tsunami_building.yaml", "--set", "dem.cohesive.sigma_c=1e7", "--fck", "30"]) == 0
+    assert "4.74 x stronger" in capsys.readouterr().out       # the paper's σ_c with our joints
     assert main(["cases/cavity_re100.yaml", "--fck", "30"]) == 2
     err = capsys.readouterr().err
     assert "cases/cavity_re100.yaml" in err and "dem.cohesive" in err
 
 
-def test_the_concrete_verification_variant_uses_the_identified_sigma_c():
-    """``verify tsunami_building_concrete`` runs the shipped case with the σ_c the CLI prints for
-    C30 and the case's 0.4 m column, and requires the paper's sequence only at the full level."""
-    from fcm_fsi.verify.cases.coupled import case_at_level
-    from fcm_fsi.verify.cases.tsunami import concrete_sigma_c
+def test_the_shipped_tsunami_case_carries_the_sigma_c_identified_for_c30():
+    """``cases/tsunami_building.yaml`` carries σ_c identified as the paper did (its column in
+    three-point bending as strong as plain C30 concrete 0.4 m deep, fib MC2010) for our joints;
+    ``verify tsunami_building_paper_sigma`` puts back the paper's 1e7, 4.74 x that."""
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.dem.strength import identify_concrete
+    from fcm_fsi.verify.cases.tsunami import PAPER_SIGMA_C
     from fcm_fsi.verify.registry import REGISTRY
-    data = case_at_level("tsunami_building", "quick", ROOT / "unused", None, resolution=True)
-    assert data["dem"]["cohesive"]["sigma_c"] == 1.0e7
-    assert concrete_sigma_c(data) == pytest.approx(2.112e6, rel=1e-3)
-    assert "tsunami_building_concrete" in REGISTRY
+    case = load_case(ROOT / "cases" / "tsunami_building.yaml")
+    identified = identify_concrete(case, 30.0e6)[0].sigma_c_identified
+    assert case.dem.cohesive.sigma_c == pytest.approx(identified, rel=5e-4)
+    assert PAPER_SIGMA_C / identified == pytest.approx(4.74, abs=0.01)
+    assert {"tsunami_building", "tsunami_building_paper_sigma"} <= set(REGISTRY)

@@ -98,13 +98,18 @@ class CouplingConfig:
     iterations: int = param(
         1, doc="passes of the fluid ⇄ DEM fixed-point iteration per fluid step: 1 = explicit (staggered); > 1 "
                "retakes the step from the same start, the fluid's wall velocity being the blocks' motion from the "
-               "last pass as `wall_velocity` and `wall_motion` define it (Aitken-relaxed), until `iteration_tol` (implicit coupling: the "
+               "last pass as `wall_velocity` and `wall_motion` define it (updated by `iteration_method`), until `iteration_tol` (implicit coupling: the "
                "added mass drops out of the stability condition; each pass costs one fluid step)", ge=1, le=50)
     iteration_tol: float = param(1.0e-3, doc="converged when max |Δv| (ω × radius of gyration for rotations) ≤ this × "
                                              "max(max |v|, iteration_velocity)", gt=0, lt=1)
     iteration_velocity: float = param(1.0e-2, unit="m/s", doc="velocity scale floor of iteration_tol (blocks at rest)",
                                       gt=0)
-    iteration_relaxation: float = param(0.5, doc="first relaxation factor of the Aitken iteration", gt=0, le=1)
+    iteration_relaxation: float = param(0.5, doc="relaxation factor of the first pass's update (Aitken: its first factor)",
+                                        gt=0, le=1)
+    iteration_method: Literal["aitken", "iqn_ils"] = param(
+        "aitken", doc="update of the guessed velocities between passes (coupling/fixed_point.py): aitken = relaxed by "
+                      "Aitken's Δ² factor (one scalar); iqn_ils = interface quasi-Newton with least-squares inverse "
+                      "Jacobian from this step's passes (Degroote et al. 2009): fewer passes when few blocks move")
     force_mode: Literal["hold", "linear"] = param(
         "hold", doc="fluid load over the DEM sub-steps: hold = constant; linear = ramp from the previous exchange")
     added_mass: float = param(0.0, doc="C_a of the added-mass stabilisation: each block's DEM inertia is raised by "

@@ -184,9 +184,7 @@ class CutDomain:
         self.surface_weight.x.array[self.q_dofs] = cs
         self.extension_weight.x.array[self.q_dofs] = np.where(cut_cells(values)[:, None], 1.0 - cv, 0.0)
         self.level_set.x.array[self.level_dofs] = level
-        bs = self.V1.dofmap.index_map_bs
-        for d in range(self.gdim):
-            self.wall_velocity.x.array[bs * self.wall_dofs + d] = wall_velocity[:, d]
+        self.set_wall_velocity(wall_velocity)
         # a cell belongs to the body owning its deepest vertex
         deepest = np.argmin(values, axis=1)
         rows = np.arange(len(values))
@@ -199,6 +197,12 @@ class CutDomain:
                                        share[1][self.geom_cells[rows, deepest]], 0.0)
         self.body_cells = values[rows, deepest] <= 0     # cells at (cut or touching Γ) or inside a body
         return self.statistics(values)
+
+    def set_wall_velocity(self, wall_velocity: np.ndarray) -> None:
+        """The wall velocity ū (n, gdim) at each node of :attr:`nodes`, the cut unchanged."""
+        bs = self.V1.dofmap.index_map_bs
+        for d in range(self.gdim):
+            self.wall_velocity.x.array[bs * self.wall_dofs + d] = wall_velocity[:, d]
 
     def fluid_fractions(self) -> np.ndarray:
         """Fluid fraction |K ∩ Ω_f| / |K| of every owned cell (0 solid … 1 fluid)."""

@@ -71,6 +71,8 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
     for key in ("preconditioner_steps", "preconditioner_max_iterations"):   # solver options (session 20)
         (data.get("fluid") or {}).pop(key, None)
     data["run"].pop("cfl_gas", None)   # the gas's Courant bound: a restart may loosen it (session 21)
+    # how the coupling's fixed point is solved (session 31): changes the solution at iteration_tol
+    (data.get("coupling") or {}).pop("iteration_method", None)
     for section, key in without:
         for holder in _option_holders(data, section):
             holder.pop(key, None)

@@ -52,6 +52,7 @@ from ..config.case import Case
 from ..config.loader import ConfigError
 from ..coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thickness, fluid_volume_ratio, gap_walls,
                                  shapes_of_blocks)
+from ..coupling.fixed_point import accelerator
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain, cut_cells
 from ..fcm.hidden import NOT_CUT, HiddenSurface
@@ -75,6 +76,11 @@ SERIES_BLOCKS = 4
 
 class CoupledModel:
     """Fluid (single- or two-phase) on a cut mesh + replicated DEM; model protocol of :mod:`.loop`."""
+
+    # the later passes of an implicit step reuse what the block velocities do not change (the cut, the
+    # last flow as Newton's start); False computes every pass from scratch (the reference the tests
+    # compare with)
+    retake_passes = True
 
     def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None, out_dir: Path | None = None):
         self.case, self.comm = case, comm
@@ -130,6 +136,8 @@ class CoupledModel:
         self._phi_of_node = None           # phase-field dof at each mesh vertex (built on first use)
         self._base_bcs = list(self.ns.bcs)
         self._plain_levelset = None        # the level set without the fill (vents, hidden pressure)
+        self._pass_cut = None              # (node owners, statistics) of the last full cut rebuild
+        self._flow_added_mass = None       # the last _potential_added_mass result (the passes of a step share it)
         if self.gap > 0 and (cp.vent_pockets or cp.drain_pockets):
             imap, dofs = self.cut.S1.dofmap.index_map, self.cut.level_dofs
             self.vents = PocketVents(comm, self.cut.geom_cells, imap.local_to_global(dofs.astype(np.int32)),
@@ -270,19 +278,22 @@ class CoupledModel:
         self._rho_field = (self.fluid.rho if hasattr(self.fluid, "rho")
                            else fem.Constant(self.mesh, float(case.fluid.density)))
 
-    def _update_added_mass(self) -> None:
+    def _update_added_mass(self, same_poses: bool = False) -> None:
         """m̃_b = C_a ρ̄_b V_b with ρ̄_b the mean fluid density on block b's wetted (cut)
         surface, so a block in air carries C_a ρ_air V_b, not the water's (with the water's,
         the lagged m̃ aⁿ term turned floor-contact chatter into a load of several times the
         weight of a block resting in air); 0 for blocks without cut surface and fixed blocks.
         Raises the DEM mass and inertia (by Ĩ = m̃ k², k the fluid-seen shape's radius of
-        gyration) for the coming sub-steps."""
+        gyration) for the coming sub-steps. ``same_poses``: a later pass of the implicit coupling,
+        whose flow-computed m̃ is the last pass's (same cut, density and clusters)."""
         ca = self.case.coupling.added_mass
         if ca == 0.0:
             return
         st = self.system.state
         if self._added_mass_from_flow():
-            extra, extra_inertia, self.added_tensor = self._potential_added_mass(ca)
+            if not same_poses or self._flow_added_mass is None:
+                self._flow_added_mass = self._potential_added_mass(ca)
+            extra, extra_inertia, self.added_tensor = self._flow_added_mass
         else:
             # (negative fitted surface weights can overshoot a sharp ρ jump slightly: clip at 0)
             rho_bar = np.maximum(np.nan_to_num(self.cut.wetted_mean(self.nb, self._rho_field), nan=0.0), 0.0)
@@ -425,10 +436,18 @@ class CoupledModel:
                         "surface runs along such a face the fluid solve is known to fail (docs/coupling.md); "
                         "shift the blocks or the mesh by a fraction of a cell", count)
 
-    def rebuild_cut(self, velocities: np.ndarray | None = None):
+    def rebuild_cut(self, velocities: np.ndarray | None = None, same_poses: bool = False):
         """(a): level set, cut weights and wall velocity from the current block poses; the
         wall velocity from the blocks' current v, ω, or from ``velocities`` (the iterated
-        unknown of :meth:`_block_velocities`)."""
+        unknown of :meth:`_block_velocities`). ``same_poses``: the blocks stand where the last
+        rebuild found them (a later pass of the implicit coupling), so only the wall velocity is
+        set again, unless ``drain_pockets`` (the drain also resets the restored flow's pressure)."""
+        if same_poses and self._pass_cut is not None and not self.case.coupling.drain_pockets:
+            owner, stats = self._pass_cut
+            ubar = self._wall_velocity_at_nodes(owner, velocities)[0]
+            self.v_rigid[self.v_of_node] = ubar
+            self.cut.set_wall_velocity(ubar)
+            return stats
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
         if self.vents is not None:
@@ -440,15 +459,7 @@ class CoupledModel:
                 self._vent_pockets(level, owner)
             if drained is not None:
                 self._drain_pockets(*drained)
-        motion = self._wall_motion(velocities)
-        ubar = self._rigid_velocity(self.points, owner, motion)
-        share = None
-        if self.case.coupling.load_split == "shared":
-            share = self._shared_ownership(owner, motion, ubar)
-        fill = self.levelset.fill_other[:, 0] != NO_SHAPE     # the gap fill: its own blend (continuous ū)
-        if fill.any():
-            ubar[fill] = self._rigid_velocity(self.points[fill], owner[fill], motion,
-                                              self.levelset.fill_other[fill], self.levelset.fill_weight[fill])
+        ubar, share = self._wall_velocity_at_nodes(owner, velocities)
         if self.hidden is not None:
             # where the fill (or a neighbour) sets the level set: the plain one minus it, > 0
             plain, _ = self._plain_levelset.evaluate(self.points, st.pos, st.quat)
@@ -456,6 +467,7 @@ class CoupledModel:
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         stats = self.cut.update(level, owner, ubar, share)
+        self._pass_cut = (owner, stats)
         if self.hidden is not None:
             cut = cut_cells(level[self.cut.geom_cells])
             self._cut_owner = np.column_stack([np.where(cut, self.cut.cell_owner, NOT_CUT),
@@ -468,6 +480,21 @@ class CoupledModel:
             # the volume correction holds the liquid of the fluid part
             self.fluid.pf.interface_cell_weights = self.cut.fluid_fractions()
         return stats
+
+    def _wall_velocity_at_nodes(self, owner: np.ndarray, velocities=None):
+        """ū (n, gdim) [m/s] at the cut's nodes from the blocks' rigid motion (:meth:`_wall_motion`),
+        blended where shapes overlap (``load_split: shared``) and in the gap fill; and the shared
+        ownership (second owner, weight) or None."""
+        motion = self._wall_motion(velocities)
+        ubar = self._rigid_velocity(self.points, owner, motion)
+        share = None
+        if self.case.coupling.load_split == "shared":
+            share = self._shared_ownership(owner, motion, ubar)
+        fill = self.levelset.fill_other[:, 0] != NO_SHAPE     # the gap fill: its own blend (continuous ū)
+        if fill.any():
+            ubar[fill] = self._rigid_velocity(self.points[fill], owner[fill], motion,
+                                              self.levelset.fill_other[fill], self.levelset.fill_weight[fill])
+        return ubar, share
 
     def _vent_pockets(self, level: np.ndarray, owner: np.ndarray) -> None:
         """``coupling.vent_pockets``: remove the gap fill (in place: level, owner and the fill's
@@ -721,8 +748,10 @@ class CoupledModel:
 
     def _advance(self, t: float, dt: float, timer: StageTimer) -> None:
         """One step; with ``coupling.iterations`` > 1 a fixed-point iteration on the block
-        velocities at tⁿ⁺¹ (wall velocity ū of the fluid ⇄ result of the DEM sub-steps) with
-        Aitken relaxation, every pass from the same start state (fluid, phase field, DEM)."""
+        velocities at tⁿ⁺¹ (wall velocity ū of the fluid ⇄ result of the DEM sub-steps),
+        accelerated as ``coupling.iteration_method`` says (coupling/fixed_point.py), every pass from the same start state (fluid, phase field, DEM); the
+        fluid's Newton iteration of a later pass starts from the last pass's flow
+        (``NavierStokes.warm_start``)."""
         cp = self.case.coupling
         st = self.system.state
         if cp.iterations == 1:
@@ -732,13 +761,20 @@ class CoupledModel:
         else:
             start = self._snapshot()
             guess = self._block_velocities()
-            r_old, omega = None, cp.iteration_relaxation
+            fixed_point = accelerator(cp.iteration_method, cp.iteration_relaxation)
             for k in range(cp.iterations):
+                retake = k > 0 and self.retake_passes
                 if k:
+                    last = self.ns.U.x.array.copy()
                     self._restore(start)
+                if retake:
+                    # a later pass differs from the last only in the wall velocity: its flow starts this
+                    # pass's Newton iteration (on the kept factorisation), and the poses, so the cut, are
+                    # the last pass's (φ is not: inside the blocks it moves with the wall velocity)
+                    self.ns.warm_start(last)
                 with timer("cut rebuild"):
-                    self.stats = self.rebuild_cut(velocities=guess)
-                F, fluid_side = self._fluid_then_dem(t, dt, timer)
+                    self.stats = self.rebuild_cut(velocities=guess, same_poses=retake)
+                F, fluid_side = self._fluid_then_dem(t, dt, timer, retake=retake)
                 if not (np.isfinite(st.pos).all() and np.isfinite(st.vel).all()):
                     self._check_dem(t + dt)              # a diverged pass stops the run, naming the block
                 result = self._block_velocities()
@@ -748,13 +784,7 @@ class CoupledModel:
                 self.iterations_done = k + 1
                 if self.iteration_residual <= cp.iteration_tol:
                     break
-                if r_old is not None:                    # Aitken's Δ² relaxation factor
-                    dr = r - r_old
-                    denom = float(dr @ dr)
-                    if denom > 0:
-                        omega = float(np.clip(-omega * (r_old @ dr) / denom, 0.05, 1.0))
-                guess = guess + omega * r
-                r_old = r
+                guess = fixed_point.next_guess(guess, result)
             else:
                 log.debug("t = %.6g s: coupling iteration not converged after %d passes (residual %.2e)",
                           t, cp.iterations, self.iteration_residual)
@@ -768,9 +798,11 @@ class CoupledModel:
         self._write_bodies(t + dt)
         self._record_bond_breaks(t + dt)
 
-    def _fluid_then_dem(self, t: float, dt: float, timer: StageTimer):
+    def _fluid_then_dem(self, t: float, dt: float, timer: StageTimer, retake: bool = False):
         """Fluid step on the current cut, the exchange, and the DEM sub-steps; returns the
-        load the DEM got and the momentum the fluid received from the wall term."""
+        load the DEM got and the momentum the fluid received from the wall term. ``retake``: a
+        later pass of the step (same poses, density and bonds: the flow's added mass is the
+        last pass's)."""
         st = self.system.state
         self.fluid.advance(t, dt, timer)
         with timer("exchange"):
@@ -784,7 +816,7 @@ class CoupledModel:
                 self.force += self.hidden_force - self.fill_force
                 self.torque += self.hidden_torque - self.fill_torque
             fluid_side = self._wall_momentum()
-            self._update_added_mass()
+            self._update_added_mass(same_poses=retake)
         with timer("dem sub-steps"):
             # the last step before t_end may be a fraction of run.dt: take whole DEM steps no
             # longer than dem.dt that fill it exactly
