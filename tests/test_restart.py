@@ -146,6 +146,11 @@ def test_fingerprint_ignores_the_solver_choice_but_not_the_physics(root):
     assert case_fingerprint(load_case(path, ["run.cfl=0.3"])) != base
     assert case_fingerprint(load_case(path, ["fluid.density=1000.5"])) != base
     assert case_fingerprint(load_case(path, ["fluid.rtol=1e-6"])) != base
+    # so may the update between the coupling's passes (session 31); the coupling's physics may not
+    tsunami = root / "cases" / "tsunami_building.yaml"
+    base_t = case_fingerprint(load_case(tsunami))
+    assert case_fingerprint(load_case(tsunami, ["coupling.iteration_method=aitken"])) == base_t
+    assert case_fingerprint(load_case(tsunami, ["coupling.cut_extension=100"])) != base_t
     # checkpoints written before (their hash covered the solver options) are still accepted
     legacy = case_fingerprint(load_case(path), legacy=True)
     assert legacy != base and case_fingerprint(load_case(path, solver[:1]), legacy=True) != legacy

@@ -77,9 +77,9 @@ SERIES_BLOCKS = 4
 class CoupledModel:
     """Fluid (single- or two-phase) on a cut mesh + replicated DEM; model protocol of :mod:`.loop`."""
 
-    # the later passes of an implicit step reuse what the block velocities do not change (the cut, the
-    # last flow as Newton's start); False computes every pass from scratch (the reference the tests
-    # compare with)
+    # the later passes of an implicit step reuse what the guessed block velocities do not change (the
+    # cut, the flow's added mass) and start Newton from the last pass's flow; False computes every pass
+    # from scratch (the reference the tests compare with)
     retake_passes = True
 
     def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None, out_dir: Path | None = None):
@@ -285,7 +285,9 @@ class CoupledModel:
         weight of a block resting in air); 0 for blocks without cut surface and fixed blocks.
         Raises the DEM mass and inertia (by Ĩ = m̃ k², k the fluid-seen shape's radius of
         gyration) for the coming sub-steps. ``same_poses``: a later pass of the implicit coupling,
-        whose flow-computed m̃ is the last pass's (same cut, density and clusters)."""
+        whose flow-computed m̃ is the first pass's (same cut and clusters; φ inside the blocks,
+        which ρ carries into it, moves with each pass's ū: 7e-7 of a block's velocity per step,
+        tests/test_coupled.py)."""
         ca = self.case.coupling.added_mass
         if ca == 0.0:
             return
@@ -749,9 +751,10 @@ class CoupledModel:
     def _advance(self, t: float, dt: float, timer: StageTimer) -> None:
         """One step; with ``coupling.iterations`` > 1 a fixed-point iteration on the block
         velocities at tⁿ⁺¹ (wall velocity ū of the fluid ⇄ result of the DEM sub-steps),
-        accelerated as ``coupling.iteration_method`` says (coupling/fixed_point.py), every pass from the same start state (fluid, phase field, DEM); the
-        fluid's Newton iteration of a later pass starts from the last pass's flow
-        (``NavierStokes.warm_start``)."""
+        updated between passes as ``coupling.iteration_method`` says (coupling/fixed_point.py),
+        every pass from the same start state (fluid, phase field, DEM); a later pass keeps the
+        first's cut and flow added mass and starts Newton from the last pass's flow
+        (``retake_passes``, ``NavierStokes.warm_start``)."""
         cp = self.case.coupling
         st = self.system.state
         if cp.iterations == 1:
@@ -801,8 +804,8 @@ class CoupledModel:
     def _fluid_then_dem(self, t: float, dt: float, timer: StageTimer, retake: bool = False):
         """Fluid step on the current cut, the exchange, and the DEM sub-steps; returns the
         load the DEM got and the momentum the fluid received from the wall term. ``retake``: a
-        later pass of the step (same poses, density and bonds: the flow's added mass is the
-        last pass's)."""
+        later pass of the step (same poses and bonds: the flow's added mass is the first
+        pass's)."""
         st = self.system.state
         self.fluid.advance(t, dt, timer)
         with timer("exchange"):
