@@ -354,3 +354,49 @@ def test_front_wall_fails_first_names_the_members_of_the_first_breaking_step():
     assert front_wall_first(np.array([[16, 208], [0, 208]]), members) == 0.0   # a column joint too
     assert front_wall_first(np.array([[32, 33]]), members) == 0.0
     assert np.isnan(front_wall_first(np.zeros((0, 2), int), members))
+
+
+def test_back_wall_peak_traction_reads_the_back_walls_largest_lambda_from_a_checkpoint(tmp_path):
+    """``back_wall_peak_traction`` (verify tsunami_building): eq 28 at the largest λ_max of the
+    bond points touching an x-max wall block (foundation joints included), capped at 1 past the
+    peak and 1 for a broken point; loads elsewhere do not count; another structure's checkpoint
+    is refused."""
+    import h5py
+
+    from fcm_fsi.config import load_case
+    from fcm_fsi.config.loader import ConfigError
+    from fcm_fsi.dem.bond_report import bonded_structure_of, member_peak_traction
+    from fcm_fsi.dem.cohesive import shape_g
+    from fcm_fsi.dem.failure_sequence import block_members
+    from fcm_fsi.verify.cases.tsunami import back_wall_peak_traction
+    case = load_case(ROOT / "cases" / "tsunami_building.yaml")
+    members = block_members(case)
+    _, bonds = bonded_structure_of(case, with_ledger=False)
+    back = {k for k, m in enumerate(members) if m.startswith("wall xmax")}
+    touches = np.array([a in back or b in back for a, b in zip(bonds.pt_a, bonds.pt_b)])
+    to_foundation = np.flatnonzero(touches & ((bonds.pt_a == 208) | (bonds.pt_b == 208)))
+    elsewhere = np.flatnonzero(~touches)
+    assert to_foundation.size and elsewhere.size
+    lam = np.zeros(bonds.n_points)
+    broken = np.zeros(bonds.n_points, bool)
+    lam[elsewhere[0]], broken[elsewhere[1]] = 0.9, True      # the front wall may break: not counted
+    lam[to_foundation[0]] = 0.2
+    ck = tmp_path / "checkpoint.h5"
+
+    def write():
+        with h5py.File(ck, "w") as f:
+            f["globals/dem_int2__bond_lam_max"] = lam
+            f["globals/dem_int2__bond_broken"] = broken
+    write()
+    assert back_wall_peak_traction(case, ck, members) == pytest.approx(float(shape_g(0.2)))
+    lam[to_foundation[1]] = 0.6                                # past the peak: its strength was reached
+    write()
+    assert back_wall_peak_traction(case, ck, members) == pytest.approx(1.0)
+    lam[to_foundation[1]] = 0.0
+    broken[to_foundation[1]] = True
+    write()
+    assert back_wall_peak_traction(case, ck, members) == pytest.approx(1.0)
+    assert np.isnan(back_wall_peak_traction(case, tmp_path / "none.h5", members))
+    assert np.isnan(member_peak_traction(bonds, lam, broken, members, "wall ymid"))
+    with pytest.raises(ConfigError, match="not this case's checkpoint"):
+        member_peak_traction(bonds, lam[:-1], broken[:-1], members, "wall xmax")

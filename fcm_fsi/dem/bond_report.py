@@ -65,15 +65,48 @@ def bonded_structure(case_path: Path, overrides: list[str], with_ledger: bool = 
     """(DEM system, its cohesive bonds) of the case at ``case_path``; ConfigError when the case
     has no DEM or no bonded blocks."""
     from ..config import load_case
+    return bonded_structure_of(load_case(case_path, overrides), with_ledger)
+
+
+def bonded_structure_of(case, with_ledger: bool = True):
+    """:func:`bonded_structure` of a loaded case."""
     from .model import build_system
-    case = load_case(case_path, overrides)
     if case.dem is None:
-        raise ConfigError(f"{case_path}: has no dem section")
+        raise ConfigError(f"{case.name}: has no dem section")
     system = build_system(case.dem, with_ledger=with_ledger)
     bonds = next((it for it in system.interactions if hasattr(it, "broken_bonds")), None)
     if bonds is None:
-        raise ConfigError(f"{case_path}: no bonded blocks in this case")
+        raise ConfigError(f"{case.name}: no bonded blocks in this case")
     return system, bonds
+
+
+def member_peak_tractions(bonds, lam_max: np.ndarray, broken: np.ndarray,
+                          members: list[str]) -> dict[str, float]:
+    """Per member (``members[k]`` is block k's member): the largest traction / σ_c carried so
+    far by a bond point joining one of its blocks — 1 once a point reached the peak σ_c
+    (λ ≥ 1/3, broken or not), NaN for a member without bond points. A point joining two
+    members counts for both; blocks beyond the list are left out. A point breaks only at
+    λ = 1, past the peak, so 1 means "reached its strength", not "broke"."""
+    if lam_max.shape != (bonds.n_points,):
+        raise ConfigError(f"the checkpoint has {lam_max.size} bond points, the case builds "
+                          f"{bonds.n_points}: not this case's checkpoint")
+    names = sorted(set(members))
+    code = np.array([names.index(m) for m in members] + [-1])       # [-1]: beyond the list
+    ratio = np.where(broken, 1.0, traction_ratio(lam_max))
+    peak = np.full(len(names), -np.inf)
+    for side in (bonds.pt_a, bonds.pt_b):
+        c = code[np.minimum(side, len(members))]
+        np.maximum.at(peak, c[c >= 0], ratio[c >= 0])
+    return {n: (float(v) if np.isfinite(v) else float("nan")) for n, v in zip(names, peak)}
+
+
+def member_peak_traction(bonds, lam_max: np.ndarray, broken: np.ndarray, members: list[str],
+                         prefix: str) -> float:
+    """:func:`member_peak_tractions` over the members whose names start with ``prefix`` (e.g.
+    ``wall xmax``: the back wall on every storey); NaN when no such member has bond points."""
+    peaks = [v for n, v in member_peak_tractions(bonds, lam_max, broken, members).items()
+             if n.startswith(prefix) and np.isfinite(v)]
+    return max(peaks) if peaks else float("nan")
 
 
 def bond_point_loads(bonds, block_pos: np.ndarray, lam_max: np.ndarray,

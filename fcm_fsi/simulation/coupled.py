@@ -254,6 +254,15 @@ class CoupledModel:
                                             {"t": "s", "bond": "-", "block_a": "-", "block_b": "-"}, comm.rank,
                                             lazy=True)
             self._broken_before = self.bonds.broken_bonds()
+        # member_loads.csv: per member of a building, the largest traction / σ_c its bonds carried so far
+        self.members, self.members_csv = None, None
+        if out_dir is not None and self.bonds is not None and case.dem.structure is not None:
+            from ..dem.failure_sequence import block_members
+            from ..io.csv import TimeSeriesCSV
+            self.members = block_members(case)
+            self.members_csv = TimeSeriesCSV(Path(out_dir) / "member_loads.csv",
+                                             {"t": "s", **{member_column(m): "sigma_c" for m in sorted(set(self.members))}},
+                                             comm.rank, lazy=True)
         # the blocks for ParaView: blocks_NNNNN.vtp + blocks.pvd at every field output
         self.blocks_dir = Path(out_dir) if out_dir is not None and case.output.xdmf else None
         self.blocks_pvd: list[tuple[float, str]] = []
@@ -800,6 +809,7 @@ class CoupledModel:
             self.dem.check_replicated(self.comm)
         self._write_bodies(t + dt)
         self._record_bond_breaks(t + dt)
+        self._record_member_loads(t + dt)
 
     def _fluid_then_dem(self, t: float, dt: float, timer: StageTimer, retake: bool = False):
         """Fluid step on the current cut, the exchange, and the DEM sub-steps; returns the
@@ -905,6 +915,16 @@ class CoupledModel:
         for bond in new:
             p = np.flatnonzero(self.bonds.pt_bond == bond)[0]
             self.breaks_csv.write(t=t, bond=bond, block_a=self.bonds.pt_a[p], block_b=self.bonds.pt_b[p])
+
+    def _record_member_loads(self, t: float) -> None:
+        """Append to ``member_loads.csv`` each building member's largest traction / σ_c so far
+        (:func:`fcm_fsi.dem.bond_report.member_peak_tractions`: 1 once a bond point of the member
+        reached its strength): how close each wall, column and slab came to failing, and when."""
+        if self.members_csv is None:
+            return
+        from ..dem.bond_report import member_peak_tractions
+        peaks = member_peak_tractions(self.bonds, self.bonds.lam_max, self.bonds.broken, self.members)
+        self.members_csv.write(t=t, **{member_column(m): v for m, v in peaks.items()})
 
     def _exchange_error(self, dt: float, stabilisation: np.ndarray, fluid_side: np.ndarray) -> float:
         """|fluid impulse the DEM integrated + momentum the fluid received| / scale, the
@@ -1140,9 +1160,15 @@ class CoupledModel:
         if self.blocks_dir is not None:                    # the collection continues from the checkpoint
             from ..dem.output import read_pvd
             self.blocks_pvd = read_pvd(self.blocks_dir / "blocks.pvd", checkpoint.time)
-        for csv in (self.bodies_csv, self.breaks_csv, self.added_mass_csv):   # continue the earlier run's files
+        for csv in (self.bodies_csv, self.breaks_csv, self.added_mass_csv, self.members_csv):   # continue the earlier run's files
             if csv is not None:
                 csv.resume(checkpoint.time)
         if self.bonds is not None:                         # bonds broken before the checkpoint are not new
             self._broken_before = self.bonds.broken_bonds()
         self.stats = self.rebuild_cut()
+
+
+def member_column(member: str) -> str:
+    """The ``member_loads.csv`` column of a building member: its name with ``_`` for spaces
+    (``wall xmax s0`` → ``wall_xmax_s0``)."""
+    return member.replace(" ", "_")

@@ -12,7 +12,10 @@ breaking step joins a block of the ground-floor front wall — member ``wall xmi
 line of storey 0, columns not included; NaN when no bond broke).
 Reported too: ``back_wall_fails_after_front`` (1 when a back-wall (x-max) bond breaks after the
 front wall's first — the paper's sequence; 0 when not; NaN when no bond broke) and the whole
-sequence, member by member, in ``failure_sequence.csv`` (:mod:`fcm_fsi.dem.failure_sequence`).
+sequence, member by member, in ``failure_sequence.csv`` (:mod:`fcm_fsi.dem.failure_sequence`),
+and ``back_wall_peak_traction``: the largest traction / σ_c a back-wall bond point carried
+(from the final checkpoint's λ_max; 1 = its strength reached, a break needs λ = 1), how close
+the paper's second failure came.
 
 The case's σ_c (2.112e6 Pa since session 31) is the paper's identification (§4(4)) applied to
 our joints: a column in three-point bending as strong as plain C30 concrete
@@ -71,6 +74,18 @@ def back_wall_after_front(sequence: list[MemberFailure]) -> float:
     return float(bool(back) and min(back) > first[FRONT_WALL])
 
 
+def back_wall_peak_traction(case, checkpoint: Path, members: list[str]) -> float:
+    """Largest traction / σ_c a back-wall (x-max, any storey) bond point carried during the run
+    in whose final ``checkpoint`` the DEM state sits (:mod:`fcm_fsi.dem.bond_report`): how close
+    the back wall came to the paper's second failure; NaN when there is no checkpoint."""
+    from ...dem.bond_report import bonded_structure_of, member_peak_traction, read_bond_state
+    if not checkpoint.exists():
+        return float("nan")
+    _, bonds = bonded_structure_of(case, with_ledger=False)
+    lam, broken = read_bond_state(checkpoint)
+    return member_peak_traction(bonds, lam, broken, members, "wall xmax")
+
+
 def _write_sequence(path: Path, sequence: list[MemberFailure]) -> None:
     lines = ["member,first_break [s],last_break [s],bonds_broken"]
     lines += [f"{f.member},{f.first_break:.6g},{f.last_break:.6g},{f.bonds}" for f in sequence]
@@ -115,10 +130,11 @@ def _collapse(data: dict, out_dir: Path, comm, sequence_required: bool, breaks_r
     water = np.abs(series["liquid_volume_error"])
     sequence = failure_sequence(breaks["t"], breaks["block_a"], breaks["block_b"], members) if some else []
     back_after = back_wall_after_front(sequence)
+    back_margin = back_wall_peak_traction(case_from_dict(data, source=data["name"]), sub / "checkpoint.h5", members)
     order = " → ".join(f"{f.member} {f.first_break:.2f} s" for f in sequence[:6]) or "no bond broke"
     if comm.rank == 0:
         _write_sequence(out_dir / "failure_sequence.csv", sequence)
-        _plot(out_dir, series)
+        _plot(out_dir, series, sub / "member_loads.csv")
         if data["output"]["xdmf"]:      # the full level: the paper's Fig. 18–19 views at 5 and 9 s
             from ...io.snapshots import render
             for t in SNAPSHOT_TIMES:
@@ -132,6 +148,9 @@ def _collapse(data: dict, out_dir: Path, comm, sequence_required: bool, breaks_r
              report_only("front_wall_fails_first", front_first, note="NaN: no bond broke")),
             (at_least("back_wall_fails_after_front", back_after, 1.0) if sequence_required else
              report_only("back_wall_fails_after_front", back_after, note="the paper's sequence")),
+            report_only("back_wall_peak_traction", back_margin, unit="σ_c",
+                        note="largest traction a back-wall bond point carried (1: its strength reached; "
+                             "a break needs λ = 1, past the peak)"),
             report_only("members_broken", float(len(sequence)), note=order),
             at_most("volume_error", float(water.max()), 5e-3),
             report_only("sigma_c", float(data["dem"]["cohesive"]["sigma_c"]), unit="Pa"),
@@ -139,12 +158,19 @@ def _collapse(data: dict, out_dir: Path, comm, sequence_required: bool, breaks_r
                                                    f"{data['mesh']['refine'][0]['size']} m")]
 
 
-def _plot(out: Path, series) -> None:
+#: members drawn in the plot's last panel: the paper's sequence (front wall, then back wall)
+PLOTTED_MEMBERS = (("wall_xmin_s0", "front wall (ground floor)"), ("wall_xmax_s0", "back wall (ground floor)"),
+                   ("wall_xmax_s1", "back wall (upper floor)"))
+
+
+def _plot(out: Path, series, member_loads: Path) -> None:
+    """Broken bonds, force on the building, water volume error and, from ``member_loads.csv``,
+    the largest traction / σ_c the front and back walls' bonds carried so far."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     t = series["t"]
-    fig, ax = plt.subplots(1, 3, figsize=(13, 3.6))
+    fig, ax = plt.subplots(1, 4, figsize=(17, 3.6))
     ax[0].plot(t, series["broken_bonds"])
     ax[0].set_ylabel("broken bonds")
     ax[1].plot(t, series["force_x"] / 1e3, label="x (downstream)")
@@ -155,6 +181,14 @@ def _plot(out: Path, series) -> None:
     ax[2].legend(fontsize=8)
     ax[2].axhline(0.5, color="k", ls="--", lw=0.8), ax[2].axhline(-0.5, color="k", ls="--", lw=0.8)
     ax[2].set_ylabel("water volume error [%]")
+    if member_loads.exists() and len(member_loads.read_text().splitlines()) > 1:
+        loads = read_series(member_loads)
+        for column, label in PLOTTED_MEMBERS:
+            if column in loads:
+                ax[3].plot(loads["t"], loads[column], label=label)
+        ax[3].axhline(1.0, color="k", ls="--", lw=0.8)
+        ax[3].set_ylim(0, 1.05), ax[3].legend(fontsize=8)
+    ax[3].set_ylabel("largest bond traction so far [σ_c]")
     for a in ax:
         a.set_xlabel("t [s]"), a.grid(alpha=0.3)
     fig.suptitle("tsunami building collapse (coarse)")
