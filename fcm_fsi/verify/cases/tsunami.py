@@ -125,12 +125,13 @@ def _collapse(data: dict, out_dir: Path, comm, sequence_required: bool, breaks_r
     some = path.exists() and len(path.read_text().splitlines()) > 1
     breaks = read_series(path) if some else {"t": np.zeros(0)}
     t_first, pairs = first_breaks(breaks)
-    members = block_members(case_from_dict(data, source=data["name"]))
+    case = case_from_dict(data, source=data["name"])
+    members = block_members(case)
     front_first = front_wall_first(pairs, members)
     water = np.abs(series["liquid_volume_error"])
     sequence = failure_sequence(breaks["t"], breaks["block_a"], breaks["block_b"], members) if some else []
     back_after = back_wall_after_front(sequence)
-    back_margin = back_wall_peak_traction(case_from_dict(data, source=data["name"]), sub / "checkpoint.h5", members)
+    back_margin = back_wall_peak_traction(case, sub / "checkpoint.h5", members)
     order = " → ".join(f"{f.member} {f.first_break:.2f} s" for f in sequence[:6]) or "no bond broke"
     if comm.rank == 0:
         _write_sequence(out_dir / "failure_sequence.csv", sequence)
