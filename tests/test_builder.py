@@ -356,7 +356,7 @@ def test_front_wall_fails_first_names_the_members_of_the_first_breaking_step():
     assert np.isnan(front_wall_first(np.zeros((0, 2), int), members))
 
 
-def test_back_wall_peak_traction_reads_the_back_walls_largest_lambda_from_a_checkpoint(tmp_path):
+def test_back_wall_peak_traction_reads_the_back_walls_largest_lambda_from_a_checkpoint(tmp_path, capsys):
     """``back_wall_peak_traction`` (verify tsunami_building): eq 28 at the largest λ_max of the
     bond points touching an x-max wall block (foundation joints included), capped at 1 past the
     peak and 1 for a broken point; loads elsewhere do not count; another structure's checkpoint
@@ -397,6 +397,17 @@ def test_back_wall_peak_traction_reads_the_back_walls_largest_lambda_from_a_chec
     write()
     assert back_wall_peak_traction(case, ck, members) == pytest.approx(1.0)
     assert np.isnan(back_wall_peak_traction(case, tmp_path / "none.h5", members))
+    # the CLI's per-member table: the same numbers, most loaded first
+    from fcm_fsi.dem.bond_report import main
+    lam[to_foundation[1]], broken[to_foundation[1]] = 0.0, False
+    write()
+    assert main([str(ROOT / "cases" / "tsunami_building.yaml"), str(ck), "--top", "1", "--members"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    table = {ln[:16].strip(): float(ln.split()[-1]) for ln in out[out.index("member            largest traction/σ_c") + 1:]}
+    assert table["wall xmax s0"] == pytest.approx(float(shape_g(0.2)), abs=1e-3)
+    assert list(table.values()) == sorted(table.values(), reverse=True)
+    assert main([str(ROOT / "cases" / "bonded_wall_surge.yaml"), str(ck), "--members"]) == 2
+    assert "error:" in capsys.readouterr().err
     assert np.isnan(member_peak_traction(bonds, lam, broken, members, "wall ymid"))
     with pytest.raises(ConfigError, match="not this case's checkpoint"):
         member_peak_traction(bonds, lam[:-1], broken[:-1], members, "wall xmax")

@@ -7,6 +7,10 @@ lists the most loaded points with their two blocks and where they sit in the str
 built (the blocks' initial poses), and summarises the rest::
 
     python -m fcm_fsi.dem.bond_report cases/tsunami_building.yaml OUTPUT/checkpoint.h5 --top 10
+    python -m fcm_fsi.dem.bond_report cases/tsunami_building.yaml OUTPUT/checkpoint.h5 --members
+
+``--members`` adds the largest traction per building member (the last row of the run's
+``member_loads.csv``).
 """
 from __future__ import annotations
 
@@ -139,11 +143,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--top", type=int, default=10, help="points to list (default 10)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="the same overrides as the run (only the dem section matters)")
+    ap.add_argument("--members", action="store_true",
+                    help="per building member (dem.structure): the largest traction carried, as member_loads.csv")
     args = ap.parse_args(argv)
     try:
-        system, bonds = bonded_structure(args.case, args.set)
+        from ..config import load_case
+        case = load_case(args.case, args.set)
+        system, bonds = bonded_structure_of(case)
         lam, broken = read_bond_state(args.checkpoint)
         loads = bond_point_loads(bonds, system.state.pos.copy(), lam, broken)
+        if args.members:
+            from .failure_sequence import block_members
+            peaks = member_peak_tractions(bonds, lam, broken, block_members(case))
     except ConfigError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -156,6 +167,10 @@ def main(argv: list[str] | None = None) -> int:
         state = "broken" if p.broken else f"{p.traction_ratio:.3f}"
         print(f"{p.point:5d} {p.bond:5d} {p.block_a:4d}-{p.block_b:<4d} {p.position[0]:8.2f} {p.position[1]:8.2f} "
               f"{p.position[2]:8.2f}   {p.lam_max:.4f}   {state}")
+    if args.members:
+        print("member            largest traction/σ_c")
+        for name, v in sorted(peaks.items(), key=lambda kv: -np.nan_to_num(kv[1], nan=-1.0)):
+            print(f"{name:16s}  {v:.3f}")
     return 0
 
 
