@@ -27,6 +27,15 @@ def run_cli(args: list[str], np_: int = 1, cwd: Path = ROOT, timeout: float = 60
     return subprocess.run(cmd, cwd=cwd, env=mpi_env(), capture_output=True, text=True, timeout=timeout)
 
 
+def run_half_and_resume(case: Path, out: Path, t_half: float, np_: int = 1) -> None:
+    """The restart tests' second run: ``case`` to ``t_half`` [s] into ``out``, then continued
+    from ``out/checkpoint.h5`` to the case's own t_end; both must succeed."""
+    half = run_cli([str(case), "--output", str(out), "--set", f"run.t_end={t_half}"], np_)
+    assert half.returncode == 0, half.stderr[-2000:]
+    resumed = run_cli([str(case), "--output", str(out), "--restart", str(out / "checkpoint.h5")], np_)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+
+
 @pytest.fixture
 def root() -> Path:
     return ROOT

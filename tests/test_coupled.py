@@ -15,7 +15,7 @@ import yaml
 
 from fcm_fsi.config import ConfigError, case_from_dict
 
-from .conftest import ROOT, mpi_env, run_cli
+from .conftest import ROOT, mpi_env, run_cli, run_half_and_resume
 
 
 def coarse_case(t_end: float = 0.06) -> dict:
@@ -67,11 +67,7 @@ def test_floating_box_exchanges_momentum_and_restarts(tmp_path):
     assert np.abs(s["liquid_volume_error"]).max() < 1e-3      # issue #4: volume within 0.1 %
     assert (tmp_path / "full" / "bodies.csv").exists()
     # restart from the mid-run checkpoint reproduces the uninterrupted run
-    half = run_cli([str(case), "--output", str(tmp_path / "half"), "--set", "run.t_end=0.03"])
-    assert half.returncode == 0, half.stderr[-2000:]
-    resumed = run_cli([str(case), "--output", str(tmp_path / "half"), "--restart",
-                       str(tmp_path / "half" / "checkpoint.h5")])
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    run_half_and_resume(case, tmp_path / "half", 0.03)
     r = read(tmp_path / "half" / "series.csv")
     assert r["t"][-1] == pytest.approx(s["t"][-1])
     assert abs(r["b0_y"][-1] - s["b0_y"][-1]) < 1e-12
@@ -350,11 +346,7 @@ def test_blocks_are_written_for_paraview_and_the_collection_continues_after_a_re
     np.testing.assert_allclose([t for t, _ in entries], [0.0, 0.004, 0.008, 0.012], atol=1e-12)
     vtp = (tmp_path / "full" / entries[-1][1]).read_text()
     assert 'Name="damage"' in vtp and 'Name="velocity"' in vtp
-    half = run_cli([str(case), "--output", str(tmp_path / "half"), "--set", "run.t_end=0.008"])
-    assert half.returncode == 0, half.stderr[-2000:]
-    resumed = run_cli([str(case), "--output", str(tmp_path / "half"), "--restart",
-                       str(tmp_path / "half" / "checkpoint.h5")])
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    run_half_and_resume(case, tmp_path / "half", 0.008)
     again = read_pvd(tmp_path / "half" / "blocks.pvd")
     assert [round(t, 9) for t, _ in again] == [round(t, 9) for t, _ in entries]
     assert len({f for _, f in again}) == 4 and all((tmp_path / "half" / f).exists() for _, f in again)
@@ -483,11 +475,7 @@ def test_implicit_quasi_newton_run_restarts_to_the_uninterrupted_run(tmp_path):
     case.write_text(yaml.safe_dump(data))
     full = run_cli([str(case), "--output", str(tmp_path / "full")])
     assert full.returncode == 0, full.stderr[-2000:]
-    half = run_cli([str(case), "--output", str(tmp_path / "half"), "--set", "run.t_end=0.012"])
-    assert half.returncode == 0, half.stderr[-2000:]
-    resumed = run_cli([str(case), "--output", str(tmp_path / "half"), "--restart",
-                       str(tmp_path / "half" / "checkpoint.h5")])
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    run_half_and_resume(case, tmp_path / "half", 0.012)
     s, r = read(tmp_path / "full" / "series.csv"), read(tmp_path / "half" / "series.csv")
     assert r["t"][-1] == pytest.approx(s["t"][-1]) == pytest.approx(0.024)
     assert s["coupling_iterations"].max() >= 2

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from .conftest import run_cli
+from .conftest import run_cli, run_half_and_resume
 
 CASE = {"name": "restart", "run": {"t_end": 0.4, "dt": 0.02, "checkpoint_every": 10, "log_every": 5},
         "mesh": {"kind": "rectangle", "lower": [-1, -1], "upper": [1, 1], "cells": [24, 24]},
@@ -38,11 +38,7 @@ def test_restart_reproduces_uninterrupted_run(tmp_path, np_):
     case.write_text(yaml.safe_dump(CASE))
     full = run_cli([str(case), "--output", str(tmp_path / "full")], np_)
     assert full.returncode == 0, full.stderr
-    half = run_cli([str(case), "--output", str(tmp_path / "half"), "--set", "run.t_end=0.2"], np_)
-    assert half.returncode == 0, half.stderr
-    resumed = run_cli([str(case), "--output", str(tmp_path / "half"), "--restart",
-                       str(tmp_path / "half" / "checkpoint.h5")], np_)
-    assert resumed.returncode == 0, resumed.stderr
+    run_half_and_resume(case, tmp_path / "half", 0.2, np_)
     a, b = final_phi(tmp_path / "full" / "checkpoint.h5"), final_phi(tmp_path / "half" / "checkpoint.h5")
     # φ is solved by GMRES to rtol 1e-12 with a partition-dependent block-Jacobi/ILU
     # preconditioner (the partition of a new run may differ): agreement to solver tolerance

@@ -146,7 +146,7 @@ def checkpoint_field(path, name) -> np.ndarray:
 def test_restart_reproduces_uninterrupted_sloshing(tmp_path):
     """4 steps = 2 steps + restart + 2 steps (φ, u and p), on a moving free surface."""
     import yaml
-    from .conftest import run_cli
+    from .conftest import run_cli, run_half_and_resume
     data = sloshing_case(size=0.1, band=0.02, dt=0.05, t_end=0.2)
     data["run"]["checkpoint_every"] = 2
     data["output"] = {"xdmf": False, "checkpoint": True}
@@ -154,10 +154,7 @@ def test_restart_reproduces_uninterrupted_sloshing(tmp_path):
     case.write_text(yaml.safe_dump(data))
     full = run_cli([str(case), "--output", str(tmp_path / "full")])
     assert full.returncode == 0, full.stderr[-2000:]
-    half = run_cli([str(case), "--output", str(tmp_path / "half"), "--set", "run.t_end=0.1"])
-    assert half.returncode == 0, half.stderr[-2000:]
-    resumed = run_cli([str(case), "--output", str(tmp_path / "half"), "--restart", str(tmp_path / "half" / "checkpoint.h5")])
-    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    run_half_and_resume(case, tmp_path / "half", 0.1)
     for name in ("phi", "U_u", "U_p"):
         a = checkpoint_field(tmp_path / "full" / "checkpoint.h5", name)
         b = checkpoint_field(tmp_path / "half" / "checkpoint.h5", name)
