@@ -138,7 +138,7 @@ def test_resolution_levels_merge_and_name_the_allowed_levels():
     with pytest.raises(ConfigError, match="resolutions"):
         case_from_dict(data)
     paper = load_case(ROOT / "cases" / "tsunami_building.yaml", ["resolution=paper"])
-    assert paper.dem.dt == 1.0e-5 and paper.mesh.refine[0].size == 0.01
+    assert paper.dem.dt == 1.0e-5 and paper.mesh.structure_band.size == 0.01
 
 
 def test_command_line_overrides_win_over_the_resolution_level():
@@ -154,7 +154,7 @@ def test_command_line_overrides_win_over_the_resolution_level():
     edited = load_case(path, ["resolutions.coarse.dem.dt=4.0e-5"])
     assert edited.dem.dt == 4.0e-5
     paper = load_case(path, ["resolution=paper", "dem.dt=2.0e-5"])
-    assert paper.dem.dt == 2.0e-5 and paper.mesh.refine[0].size == 0.01
+    assert paper.dem.dt == 2.0e-5 and paper.mesh.structure_band.size == 0.01
 
 
 def test_cli_phase_field_without_liquid_names_file_and_key(tmp_path):

@@ -42,6 +42,9 @@ class Case:
             raise ConfigError("key 'run.cfl_gas' applies to two-phase flow: it needs both phase_field and fluid")
         if self.fluid is not None and self.dem is not None:
             self._check_coupled()
+        elif self.mesh is not None and self.mesh.structure_band is not None:
+            raise ConfigError("key 'mesh.structure_band' grades the mesh around dem blocks: it needs a coupled "
+                              "case (both fluid and dem sections)")
 
     def _check_coupled(self) -> None:
         dim = len(self.mesh.lower)

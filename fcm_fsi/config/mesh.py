@@ -18,6 +18,18 @@ class RefineZone:
 
 
 @dataclass(frozen=True, kw_only=True)
+class StructureBand:
+    """Cells graded away from the structure: ``size`` at the faces of the DEM blocks (as the
+    fluid sees them, at their starting poses), growing by ``grading`` per metre of distance,
+    up to ``mesh.size``. A band, not a box: the cell count grows with the blocks' face area,
+    not with the volume around them."""
+
+    size: float = param(unit="m", doc="cell size at the blocks' faces", gt=0)
+    grading: float = param(0.3, doc="growth of the cell size per metre of distance from the faces (dh/dd): "
+                           "0.3 doubles it about every 3 cells", gt=0, le=1)
+
+
+@dataclass(frozen=True, kw_only=True)
 class MeshConfig:
     """Structured rectangle/box meshes from dolfinx, or gmsh meshes (generated and cached, or a file)."""
 
@@ -28,6 +40,8 @@ class MeshConfig:
     size: float = param(0.05, unit="m", doc="target cell size for gmsh_box and gmsh_disk", gt=0)
     radius: float = param(1.0, unit="m", doc="gmsh_disk radius (the disk is centred in the lower..upper box)", gt=0)
     refine: tuple[RefineZone, ...] = param(default_factory=tuple, doc="gmsh_box refine zones")
+    structure_band: StructureBand | None = param(None, doc="gmsh_box/gmsh_disk in a case with dem blocks: "
+                                                 "cells graded from a size at the blocks' faces (a coupled case only)")
     file: str = param("", doc="path of a gmsh .msh file for gmsh_file (relative to the case file)")
     diagonal: Literal["right", "left", "crossed"] = param("right", doc="triangle diagonal for rectangle meshes")
 
@@ -42,6 +56,13 @@ class MeshConfig:
             raise ConfigError("key 'mesh.kind' = 'gmsh_disk' is 2D: give 2 entries in mesh.lower/upper")
         if self.kind == "gmsh_file" and not self.file:
             raise ConfigError("key 'mesh.file' is required when mesh.kind = 'gmsh_file'")
+        band = self.structure_band
+        if band is not None:
+            if self.kind not in ("gmsh_box", "gmsh_disk"):
+                raise ConfigError(f"key 'mesh.structure_band' needs mesh.kind gmsh_box or gmsh_disk, not {self.kind!r}")
+            if band.size >= self.size:
+                raise ConfigError(f"key 'mesh.structure_band.size' = {band.size:g} m: allowed 0 < size < "
+                                  f"mesh.size = {self.size:g} m")
 
     @property
     def dim(self) -> int:

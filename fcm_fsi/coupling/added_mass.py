@@ -38,6 +38,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..fluid.solvers import DIRECT_LU, make_ksp
+from ..fluid.solvers import solve as solve_ksp
 
 #: solver of the pressure-impulse Laplacian (a symmetric positive definite P1 system)
 POISSON_2D = dict(DIRECT_LU)
@@ -159,7 +160,7 @@ class PotentialAddedMass:
             for k in range(nm):
                 if norms[k] == 0.0:
                     continue
-                self._ksp.solve(self._b[k], self._p)
+                solve_ksp(self._ksp, self._b[k], self._p)
                 self.last_solves += 1
                 for j in range(nm):
                     out[g, j, k] = self._p.dot(self._b[j])

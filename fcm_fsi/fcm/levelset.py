@@ -442,6 +442,36 @@ class StructureLevelSet:
         return phi, owner
 
 
+class FaceDistance:
+    """Distance [m] from a point to the nearest face of the primitives at fixed body poses:
+    outside them the distance to their union, inside one its depth in that primitive (so the
+    faces between touching primitives count too). Called point by point, e.g. by gmsh's mesh
+    size callback (``mesh.structure_band``); O(primitives) per call."""
+
+    def __init__(self, shapes: Shapes, body_pos: np.ndarray, body_quat: np.ndarray):
+        nb = len(np.asarray(body_pos).reshape(-1, 3))
+        self.kind, self.half = shapes.kind, shapes.half
+        self.centre, self.R = _world_frames(shapes.body, shapes.offset, shapes.rot,
+                                            np.ascontiguousarray(body_pos, np.float64).reshape(nb, 3),
+                                            np.ascontiguousarray(body_quat, np.float64).reshape(nb, 4))
+
+    def __call__(self, x: float, y: float, z: float) -> float:
+        return _face_distance(float(x), float(y), float(z), self.kind, self.half, self.centre, self.R)
+
+
+@numba.njit(cache=True)
+def _face_distance(x, y, z, kind, half, centre, R):
+    """|min over primitives of the signed distance| at (x, y, z); inf without primitives."""
+    best = np.inf
+    for s in range(kind.shape[0]):
+        dx, dy, dz = x - centre[s, 0], y - centre[s, 1], z - centre[s, 2]
+        px = R[s, 0, 0] * dx + R[s, 1, 0] * dy + R[s, 2, 0] * dz     # Rᵀ (x − c)
+        py = R[s, 0, 1] * dx + R[s, 1, 1] * dy + R[s, 2, 1] * dz
+        pz = R[s, 0, 2] * dx + R[s, 1, 2] * dy + R[s, 2, 2] * dz
+        best = min(best, _local_distance(kind[s], half[s, 0], half[s, 1], half[s, 2], px, py, pz))
+    return abs(best)
+
+
 def _unit_planes(walls) -> np.ndarray:
     """Planes (np, 6): point [m] and unit normal, from rows of point + any non-zero normal."""
     p = np.zeros((0, 6)) if walls is None else np.array(walls, np.float64).reshape(-1, 6)

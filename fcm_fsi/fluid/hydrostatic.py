@@ -84,7 +84,7 @@ class StaticPressure:
         fem.petsc.apply_lifting(self.b, [self._a], bcs=[self.bcs])
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fem.petsc.set_bc(self.b, self.bcs)
-        self.ksp.solve(self.b, self.Pi.vector)
+        solvers.solve(self.ksp, self.b, self.Pi.vector)
         solvers.check_converged(self.ksp, self.ns.step_count, self.ns.t)
         self.Pi.x.scatter_forward()
         self.p1.interpolate(self.Pi)

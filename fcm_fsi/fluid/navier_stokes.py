@@ -526,11 +526,11 @@ class NavierStokes:
             t1 = time.perf_counter()
             reuse = bool(self.reuse_preconditioner and (it > 0 or keep or self._preconditioner_still_good()))
             self.ksp.getPC().setReusePreconditioner(reuse)
-            self.ksp.solve(self.b, self.dU.vector)
+            solvers.solve(self.ksp, self.b, self.dU.vector)
             if reuse and self.ksp.getConvergedReason() < 0:   # the kept preconditioner has gone stale
                 info.krylov_iterations += self.ksp.getIterationNumber()
                 self.ksp.getPC().setReusePreconditioner(False)
-                self.ksp.solve(self.b, self.dU.vector)
+                solvers.solve(self.ksp, self.b, self.dU.vector)
                 reuse = False
             if not reuse:
                 self._preconditioner_built = self.step_count

@@ -35,6 +35,8 @@ from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_vector
 from ..config.loader import ConfigError
 from ..config.phase_field import InitialShape, PhaseFieldConfig
 from ..fcm.cut import cut_measures
+from .solvers import make_ksp
+from .solvers import solve as solve_ksp
 
 # Quadrature degree per form: with the P1 nodal normal the conservative integrands are
 # polynomials of degree ≤ 3 (exact at degree 3); the classical reaction term
@@ -271,13 +273,7 @@ class PhaseField:
         self.outflow_total = 0.0  # ∫∫ φ_θ (u·n)⁺ ds dt: liquid that left through the boundary [m^d]
         self.A = assemble_matrix(self.a)
         self.b = create_vector(self.L)
-        self.ksp = PETSc.KSP().create(self.comm)
-        self.ksp.setOptionsPrefix("pf_")
-        opts = PETSc.Options()
-        for k, v in cfg.petsc.items():
-            opts[f"pf_{k}"] = v
-        self.ksp.setFromOptions()
-        self.ksp.setOperators(self.A)
+        self.ksp = make_ksp(self.comm, self.A, "pf_", cfg.petsc)
         self.geometry = p1_cell_geometry(self.V)
         self.steps_done = 0
         self.volume0 = None
@@ -351,7 +347,7 @@ class PhaseField:
         assemble_vector(self.b, self.L)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.ksp.setOperators(self.A)
-        self.ksp.solve(self.b, self.phi.vector)
+        solve_ksp(self.ksp, self.b, self.phi.vector)
         reason = self.ksp.getConvergedReason()
         if reason < 0:
             raise FloatingPointError(f"phase-field linear solve failed (KSP reason {reason})")

@@ -62,10 +62,28 @@ def make_ksp(comm, A: PETSc.Mat, prefix: str, options: dict,
             raise ValueError(f"solver options {prefix}*: pc_type fieldsplit needs named fields, "
                              "and this system has none")
         pc.setFieldSplitIS(*fields.items())
-    for key in options:          # keep the global options table clean for other solvers
-        if not (split and key.startswith("fieldsplit_")):   # the blocks read theirs at the first set-up
-            opts.delValue(f"{prefix}{key}")
+    # The options stay in PETSc's table until the first solve has set the solver up: the
+    # preconditioner's parts read theirs only then (bjacobi's sub_*, fieldsplit_*, the factor's
+    # mat_mumps_*). :func:`solve` then removes them, so that a later solver with the same
+    # prefix does not inherit them. (Until session 33 they were removed here, and every
+    # set-up-time option in a case file was silently ignored.)
+    _PENDING[ksp.handle] = [f"{prefix}{key}" for key in options]
     return ksp
+
+
+#: KSP handle → its option names to remove from PETSc's table after its first solve
+_PENDING: dict[int, list[str]] = {}
+
+
+def solve(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec) -> None:
+    """``ksp.solve(b, x)`` for a KSP of :func:`make_ksp`; after the first solve its options
+    leave the global table (the set-up has read them all)."""
+    ksp.solve(b, x)
+    keys = _PENDING.pop(ksp.handle, None)
+    if keys:
+        opts = PETSc.Options()
+        for key in keys:
+            opts.delValue(key)
 
 
 def check_converged(ksp: PETSc.KSP, step: int, time: float) -> None:
@@ -76,7 +94,33 @@ def check_converged(ksp: PETSc.KSP, step: int, time: float) -> None:
     if reason < 0:
         raise LinearSolveError(f"linear solve {ksp.getOptionsPrefix()} diverged at step {step} "
                                f"(t = {time:.6g} s): reason {reason}, {ksp.getIterationNumber()} iterations, "
-                               f"residual {ksp.getResidualNorm():.3e}")
+                               f"residual {ksp.getResidualNorm():.3e}{factor_failure(ksp)}")
+
+
+#: MUMPS INFOG(1) codes of a failed factorisation (MUMPS 5 user guide, §8)
+MUMPS_ERRORS = {-8: "integer workspace too small: raise mat_mumps_icntl_14 (extra workspace, %)",
+                -9: "real workspace too small: raise mat_mumps_icntl_14 (extra workspace, %)",
+                -10: "the matrix is numerically singular",
+                -13: "out of memory"}
+
+
+def factor_failure(ksp: PETSc.KSP) -> str:
+    """'; MUMPS INFOG(1) = …' when the preconditioner is a MUMPS factorisation that failed,
+    else '' (a failed factorisation shows only as KSP reason −11, DIVERGED_PCSETUP_FAILED)."""
+    if ksp.getConvergedReason() != PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED:
+        return ""
+    try:
+        pc = ksp.getPC()
+        if pc.getType() not in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY):
+            return ""
+        factor = pc.getFactorMatrix()
+        if factor.getType() != "mumps":
+            return ""
+        code, detail = factor.getMumpsInfog(1), factor.getMumpsInfog(2)
+    except PETSc.Error:
+        return ""
+    meaning = MUMPS_ERRORS.get(code, "see the MUMPS user guide")
+    return f"; MUMPS INFOG(1) = {code}, INFOG(2) = {detail}: {meaning}"
 
 
 def _true_residual_met(ksp: PETSc.KSP) -> bool:

@@ -50,8 +50,8 @@ from petsc4py import PETSc
 
 from ..config.case import Case
 from ..config.loader import ConfigError
-from ..coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thickness, fluid_volume_ratio, gap_walls,
-                                 shapes_of_blocks)
+from ..coupling.dem_side import (DEMSubcycler, block_face_distance, fluid_gyration_ratio, fluid_thickness,
+                                 fluid_volume_ratio, gap_walls, shapes_of_blocks)
 from ..coupling.fixed_point import accelerator
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain, cut_cells
@@ -85,7 +85,12 @@ class CoupledModel:
     def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None, out_dir: Path | None = None):
         self.case, self.comm = case, comm
         cp = case.coupling
-        self.mesh = build_mesh(case.mesh, comm, case_dir)
+        self.system = build_system(case.dem)
+        st = self.system.state
+        block_faces = None
+        if case.mesh.structure_band is not None:     # cells graded away from the blocks' faces
+            block_faces = block_face_distance(case.dem, st, cp.min_thickness)
+        self.mesh = build_mesh(case.mesh, comm, case_dir, face_distance=block_faces)
         self.gdim = self.mesh.geometry.dim
         self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, wall=cp.wall,
                              extension=cp.cut_extension, slip=cp.wall_slip)
@@ -100,9 +105,7 @@ class CoupledModel:
         self.ns = self.fluid.ns
         self.h_min = self.fluid.h_min
 
-        self.system = build_system(case.dem)
         self.dem = DEMSubcycler(self.system)
-        st = self.system.state
         self.nb = st.nb
         self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
         self._remember_own_inertia(case)
