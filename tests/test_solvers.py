@@ -68,6 +68,10 @@ def test_set_up_time_options_reach_the_preconditioner_and_leave_the_table():
     again = make_ksp(MPI.COMM_SELF, L, "t_bj_", {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-10})
     solve_ones(again, L)                # a later solver with the prefix gets the default ILU(0), not LU
     assert again.getIterationNumber() > 3
+    make_ksp(MPI.COMM_SELF, L, "t_bj_", {"ksp_type": "gmres", "pc_type": "bjacobi", "sub_pc_type": "lu"})
+    after = make_ksp(MPI.COMM_SELF, L, "t_bj_", {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-10})
+    solve_ones(after, L)                # nor from one that was made and never solved
+    assert after.getIterationNumber() > 3 and left_with("t_bj_") == []
 
 
 def test_a_failed_mumps_factorisation_is_named():

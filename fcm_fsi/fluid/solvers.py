@@ -48,6 +48,11 @@ def make_ksp(comm, A: PETSc.Mat, prefix: str, options: dict,
     the blocks as ``fieldsplit_u_*`` and ``fieldsplit_p_*``.
     """
     opts = PETSc.Options()
+    for handle, (earlier, keys) in list(_PENDING.items()):   # an unsolved solver's leftovers under this prefix
+        if earlier == prefix:
+            for key in keys:
+                opts.delValue(key)
+            del _PENDING[handle]
     for key, val in options.items():
         opts[f"{prefix}{key}"] = val
     ksp = PETSc.KSP().create(comm)
@@ -67,23 +72,22 @@ def make_ksp(comm, A: PETSc.Mat, prefix: str, options: dict,
     # mat_mumps_*). :func:`solve` then removes them, so that a later solver with the same
     # prefix does not inherit them. (Until session 33 they were removed here, and every
     # set-up-time option in a case file was silently ignored.)
-    _PENDING[ksp.handle] = [f"{prefix}{key}" for key in options]
+    _PENDING[ksp.handle] = (prefix, [f"{prefix}{key}" for key in options])
     return ksp
 
 
-#: KSP handle → its option names to remove from PETSc's table after its first solve
-_PENDING: dict[int, list[str]] = {}
+#: KSP handle → (prefix, its option names) to remove from PETSc's table after its first solve
+_PENDING: dict[int, tuple[str, list[str]]] = {}
 
 
 def solve(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec) -> None:
     """``ksp.solve(b, x)`` for a KSP of :func:`make_ksp`; after the first solve its options
     leave the global table (the set-up has read them all)."""
     ksp.solve(b, x)
-    keys = _PENDING.pop(ksp.handle, None)
-    if keys:
-        opts = PETSc.Options()
-        for key in keys:
-            opts.delValue(key)
+    _, keys = _PENDING.pop(ksp.handle, (None, ()))
+    opts = PETSc.Options()
+    for key in keys:
+        opts.delValue(key)
 
 
 def check_converged(ksp: PETSc.KSP, step: int, time: float) -> None:
