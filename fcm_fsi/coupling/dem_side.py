@@ -43,9 +43,9 @@ from ..config.dem import DEMConfig
 from ..dem.model import build_structure, template_of
 from ..dem.state import DEMState, quat_to_matrix_np
 from ..dem.system import DEMSystem, substep_count
-from ..fcm.levelset import BOX, SPHERE, FaceDistance, Shapes
+from ..fcm.levelset import BOX, SPHERE, Shapes
 
-__all__ = ["DEMSubcycler", "Exchange", "block_face_distance", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio", "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity",
+__all__ = ["DEMSubcycler", "Exchange", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio", "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity",
            "shapes_of_blocks", "state_digests", "substep_count"]
 
 REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # compared across ranks
@@ -81,12 +81,6 @@ def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0
     if first != state.nb:
         raise ValueError(f"the DEM config describes {first} blocks but the state has {state.nb}")
     return Shapes.concat(parts)
-
-
-def block_face_distance(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0) -> FaceDistance:
-    """Distance [m] to the faces of the blocks as the fluid sees them (:func:`shapes_of_blocks`)
-    at the poses of ``state``: what ``mesh.structure_band`` grades the mesh from."""
-    return FaceDistance(shapes_of_blocks(cfg, state, min_thickness), state.pos, state.quat)
 
 
 def fluid_volume_ratio(cfg: DEMConfig, state: DEMState, min_thickness: float, gdim: int) -> np.ndarray:

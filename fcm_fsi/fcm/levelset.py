@@ -252,6 +252,16 @@ def _local_distance(kind, hx, hy, hz, px, py, pz):
 
 
 @numba.njit(cache=True, inline="always")
+def _primitive_distance(kind, half, R, s, dx, dy, dz):
+    """Signed distance [m] to primitive ``s`` of the point at (dx, dy, dz) from its world
+    centre: the shape-frame point Rᵀ (x − c), then :func:`_local_distance`."""
+    px = R[s, 0, 0] * dx + R[s, 1, 0] * dy + R[s, 2, 0] * dz
+    py = R[s, 0, 1] * dx + R[s, 1, 1] * dy + R[s, 2, 1] * dz
+    pz = R[s, 0, 2] * dx + R[s, 1, 2] * dy + R[s, 2, 2] * dz
+    return _local_distance(kind[s], half[s, 0], half[s, 1], half[s, 2], px, py, pz)
+
+
+@numba.njit(cache=True, inline="always")
 def _point_cell(x, lo, dims, cell):
     """Flat index of the grid cell holding point x, −1 outside the grid."""
     c = 0
@@ -304,10 +314,7 @@ def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, st
                 reach = radius[s] + cutoff
                 if dx * dx + dy * dy + dz * dz >= reach * reach:
                     continue
-                px = R[s, 0, 0] * dx + R[s, 1, 0] * dy + R[s, 2, 0] * dz     # Rᵀ (x − c)
-                py = R[s, 0, 1] * dx + R[s, 1, 1] * dy + R[s, 2, 1] * dz
-                pz = R[s, 0, 2] * dx + R[s, 1, 2] * dy + R[s, 2, 2] * dz
-                d = _local_distance(kind[s], half[s, 0], half[s, 1], half[s, 2], px, py, pz)
+                d = _primitive_distance(kind, half, R, s, dx, dy, dz)
                 if d < best:
                     best = d
                     arg = s
@@ -464,11 +471,7 @@ def _face_distance(x, y, z, kind, half, centre, R):
     """|min over primitives of the signed distance| at (x, y, z); inf without primitives."""
     best = np.inf
     for s in range(kind.shape[0]):
-        dx, dy, dz = x - centre[s, 0], y - centre[s, 1], z - centre[s, 2]
-        px = R[s, 0, 0] * dx + R[s, 1, 0] * dy + R[s, 2, 0] * dz     # Rᵀ (x − c)
-        py = R[s, 0, 1] * dx + R[s, 1, 1] * dy + R[s, 2, 1] * dz
-        pz = R[s, 0, 2] * dx + R[s, 1, 2] * dy + R[s, 2, 2] * dz
-        best = min(best, _local_distance(kind[s], half[s, 0], half[s, 1], half[s, 2], px, py, pz))
+        best = min(best, _primitive_distance(kind, half, R, s, x - centre[s, 0], y - centre[s, 1], z - centre[s, 2]))
     return abs(best)
 
 

@@ -35,8 +35,7 @@ from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_vector
 from ..config.loader import ConfigError
 from ..config.phase_field import InitialShape, PhaseFieldConfig
 from ..fcm.cut import cut_measures
-from .solvers import make_ksp
-from .solvers import solve as solve_ksp
+from .solvers import make_ksp, solve as solve_ksp
 
 # Quadrature degree per form: with the P1 nodal normal the conservative integrands are
 # polynomials of degree ≤ 3 (exact at degree 3); the classical reaction term

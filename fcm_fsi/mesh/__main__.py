@@ -31,10 +31,11 @@ def face_distance_of(case):
     """The blocks' face distance when the case grades its mesh from them, else None."""
     if case.mesh.structure_band is None:
         return None
-    from ..coupling.dem_side import block_face_distance
+    from ..coupling.dem_side import shapes_of_blocks
     from ..dem.model import build_state, build_structure
+    from ..fcm.levelset import FaceDistance
     state = build_state(case.dem, build_structure(case.dem))
-    return block_face_distance(case.dem, state, case.coupling.min_thickness)
+    return FaceDistance(shapes_of_blocks(case.dem, state, case.coupling.min_thickness), state.pos, state.quat)
 
 
 def main(argv: list[str] | None = None) -> int:

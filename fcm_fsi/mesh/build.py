@@ -68,8 +68,6 @@ def gmsh_box(cfg: MeshConfig, comm: MPI.Comm,
              face_distance: Callable[[float, float, float], float] | None = None) -> dmesh.Mesh:
     """Unstructured rectangle/box/disk from gmsh with refine zones and the structure band
     (generated on rank 0, distributed by dolfinx)."""
-    if cfg.structure_band is not None and face_distance is None:
-        raise ConfigError("key 'mesh.structure_band' needs the structure's blocks (a coupled case)")
     return _from_rank0(comm, cfg.dim, lambda: generate_gmsh_box(cfg, face_distance))
 
 

@@ -50,13 +50,13 @@ from petsc4py import PETSc
 
 from ..config.case import Case
 from ..config.loader import ConfigError
-from ..coupling.dem_side import (DEMSubcycler, block_face_distance, fluid_gyration_ratio, fluid_thickness,
-                                 fluid_volume_ratio, gap_walls, shapes_of_blocks)
+from ..coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thickness, fluid_volume_ratio, gap_walls,
+                                 shapes_of_blocks)
 from ..coupling.fixed_point import accelerator
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain, cut_cells
 from ..fcm.hidden import NOT_CUT, HiddenSurface
-from ..fcm.levelset import NO_SHAPE, StructureLevelSet
+from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
 from ..fcm.pockets import PocketVents
 from ..fluid.solvers import LinearSolveError
 from ..io.logging import get_logger
@@ -87,9 +87,10 @@ class CoupledModel:
         cp = case.coupling
         self.system = build_system(case.dem)
         st = self.system.state
+        shapes = shapes_of_blocks(case.dem, st, cp.min_thickness)     # the blocks as the fluid sees them
         block_faces = None
         if case.mesh.structure_band is not None:     # cells graded away from the blocks' faces
-            block_faces = block_face_distance(case.dem, st, cp.min_thickness)
+            block_faces = FaceDistance(shapes, st.pos, st.quat)
         self.mesh = build_mesh(case.mesh, comm, case_dir, face_distance=block_faces)
         self.gdim = self.mesh.geometry.dim
         self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, wall=cp.wall,
@@ -129,7 +130,7 @@ class CoupledModel:
         if self.gap >= self.band:
             raise ConfigError(f"key 'coupling.gap_fill' = {self.gap:.4g} m: allowed 0 ≤ gap_fill < the level-set "
                               f"band {self.band:.4g} m (coupling.band, default 2 × the largest cell)")
-        self.levelset = StructureLevelSet(shapes_of_blocks(case.dem, st, cp.min_thickness), self.nb, self.band,
+        self.levelset = StructureLevelSet(shapes, self.nb, self.band,
                                           gap=self.gap,
                                           walls=gap_walls(case.dem, self.gdim))
         self.points = np.zeros((self.cut.nodes.shape[0], 3))
