@@ -27,23 +27,23 @@ class CouplingConfig:
     wall_slip: bool = param(
         False, doc="the wall penalty (and the cut-cell extension) act on the normal velocity only: a slip wall "
                    "without shear, for meshes far coarser than the boundary layer, where a no-slip wall's discrete "
-                   "reaction is a spurious shear of order ρ h |u|/Δt (docs/tsunami.md); false = no-slip")
+                   "reaction is a spurious shear of order ρ h |u|/Δt (docs/tsunami-history.md); false = no-slip")
     wall_velocity: Literal["end", "mean"] = param(
         "end", doc="block velocity the fluid's wall condition gets for the next step: end = v, ω at the end of the "
                    "DEM sub-steps; mean = their mean over the sub-steps (the displacement / Δt_f), which does not "
-                   "alias vibrations of bonded blocks far faster than the fluid step into the fluid (docs/tsunami.md)")
+                   "alias vibrations of bonded blocks far faster than the fluid step into the fluid (docs/tsunami-history.md)")
     load_split: Literal["owner", "shared"] = param(
         "owner", doc="which block a cut cell's load (and a node's wall velocity) belongs to: owner = the block its "
                      "deepest vertex is deepest in; shared = where a second block's shape is within one cell (the "
                      "smallest, h) of as deep, the two share it, the second's weight ½ − (d₂ − d₁)/(2h) ≥ 0 — continuous where "
                      "widened shapes overlap and blocks turn, where owner jumps between bonded neighbours every "
-                     "step (docs/tsunami.md, session 14)")
+                     "step (docs/tsunami-history.md, session 14)")
     wall_motion: Literal["block", "bonded_cluster"] = param(
         "block", doc="whose rigid motion the fluid's wall velocity ū follows: block = each block's own v, ω; "
                      "bonded_cluster = the rigid motion (momentum and angular momentum kept) of the cluster of blocks "
                      "still joined by intact bonds, so the bonds' vibration (µm, faster than the fluid step) is not "
                      "fed into the wall condition, where neighbours' differing ū made the penalty push them apart "
-                     "(docs/tsunami.md, session 15); a block whose bonds have all broken follows its own motion; a "
+                     "(docs/tsunami-history.md, session 15); a block whose bonds have all broken follows its own motion; a "
                      "cluster holding a fixed block is at rest")
     cut_extension: float = param(
         1.0, doc="β of the cut-cell extension: the solid part of every cut cell carries a Brinkman term "

@@ -22,7 +22,7 @@ our joints: a column in three-point bending as strong as plain C30 concrete
 (:mod:`fcm_fsi.dem.strength`); at the full level the paper's sequence is required
 (``back_wall_fails_after_front``). ``tsunami_building_paper_sigma`` runs the same case with the
 paper's number, 1.0e7 Pa, which our joints turn into 4.7 × C30's flexural strength: its breaks
-are reported, not required (docs/tsunami.md, sessions 22 and 30).
+are reported, not required (docs/tsunami-history.md, sessions 22 and 30).
 """
 from __future__ import annotations
 
