@@ -47,12 +47,9 @@ def make_ksp(comm, A: PETSc.Mat, prefix: str, options: dict,
     handed to the preconditioner when ``pc_type`` is ``fieldsplit``, so the options can address
     the blocks as ``fieldsplit_u_*`` and ``fieldsplit_p_*``.
     """
+    for handle in [h for h, (earlier, _) in _PENDING.items() if earlier == prefix]:
+        _release_options(handle)                     # an unsolved solver's leftovers under this prefix
     opts = PETSc.Options()
-    for handle, (earlier, keys) in list(_PENDING.items()):   # an unsolved solver's leftovers under this prefix
-        if earlier == prefix:
-            for key in keys:
-                opts.delValue(key)
-            del _PENDING[handle]
     for key, val in options.items():
         opts[f"{prefix}{key}"] = val
     ksp = PETSc.KSP().create(comm)
@@ -84,7 +81,12 @@ def solve(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec) -> None:
     """``ksp.solve(b, x)`` for a KSP of :func:`make_ksp`; after the first solve its options
     leave the global table (the set-up has read them all)."""
     ksp.solve(b, x)
-    _, keys = _PENDING.pop(ksp.handle, (None, ()))
+    _release_options(ksp.handle)
+
+
+def _release_options(handle: int) -> None:
+    """Remove the options :func:`make_ksp` left in PETSc's table for the KSP ``handle``."""
+    _, keys = _PENDING.pop(handle, (None, ()))
     opts = PETSc.Options()
     for key in keys:
         opts.delValue(key)
