@@ -422,3 +422,30 @@ def test_shared_stop_file_stops_each_run_of_a_set_and_stays(tmp_path):
             loop.run()
         assert loop.step == 1 and (tmp_path / name / "checkpoint.h5").exists()
     assert shared.exists()
+
+
+def test_dt_growth_limits_the_adapted_step_to_a_factor_of_the_last():
+    """run.dt_growth: from rest the CFL rule alone would jump to dt_max; with the limit the step
+    grows by at most the factor per step, and a falling CFL step is never held up."""
+    from fcm_fsi.config.case import case_from_dict
+    from fcm_fsi.config.loader import ConfigError
+    from fcm_fsi.simulation.loop import next_dt
+
+    class Model:
+        def __init__(self, dt):
+            self.dt = dt
+
+        def stable_dt(self, cfl):
+            return self.dt
+
+    data = {"name": "x", "run": {"t_end": 1.0, "dt": 1e-3, "cfl": 1.0, "dt_max": 0.01},
+            "mesh": {"kind": "rectangle"}, "fluid": {}}
+    free = case_from_dict(data)
+    data["run"]["dt_growth"] = 1.2
+    limited = case_from_dict(data)
+    at_rest = Model(np.inf)
+    assert next_dt(free, at_rest, 0.0, 1e-3) == pytest.approx(0.01)
+    assert next_dt(limited, at_rest, 0.0, 1e-3) == pytest.approx(1.2e-3)
+    assert next_dt(limited, Model(5e-4), 0.0, 1e-3) == pytest.approx(5e-4)
+    with pytest.raises(ConfigError, match="run.dt_growth"):
+        case_from_dict({**data, "run": {**data["run"], "dt_growth": 0.5}})

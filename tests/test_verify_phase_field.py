@@ -41,7 +41,7 @@ def test_rotating_sphere_quick_on_two_ranks_writes_metrics_plot_and_report(tmp_p
     assert "## rotating_sphere" in report and "rotating_sphere__rotating_sphere.png" in report
 
 
-@pytest.mark.parametrize("name", ["rotating_cylinder", "zalesak_disk"])
+@pytest.mark.parametrize("name", ["rotating_cylinder", "zalesak_disk", "dam_break"])
 def test_phase_field_quick_levels_pass(name, tmp_path):
     res = run_verify([name, "--level", "quick", "--out", str(tmp_path)])
     assert res.returncode == 0, res.stdout + res.stderr

@@ -72,8 +72,11 @@ class FluidConfig:
     startup_steps: int = param(2, doc="first steps made of two backward-Euler half steps (Rannacher start-up; "
                                          "damps incompatible initial data that Crank–Nicolson keeps)", ge=0)
     stabilization: StabilizationConfig = param(default_factory=StabilizationConfig, doc="stabilization terms")
-    nonlinear: Literal["newton", "picard"] = param(
-        "newton", doc="newton: exact Jacobian with τ frozen per iteration; picard: advecting velocity frozen (Oseen)")
+    nonlinear: Literal["newton", "picard", "linearised"] = param(
+        "newton", doc="newton: exact Jacobian with τ frozen per iteration, iterated to rtol/atol; picard: advecting "
+                      "velocity frozen (Oseen), iterated; linearised: one Oseen solve per step with the advecting "
+                      "velocity and τ extrapolated from the last two steps, (1 + θ)uⁿ − θuⁿ⁻¹ (second order, no "
+                      "iteration: rtol, atol only decide whether a solve is needed)")
     rtol: float = param(1.0e-8, doc="nonlinear stop: ‖R‖ ≤ max(rtol·‖R₀‖, atol) each step", gt=0, lt=1)
     atol: float = param(1.0e-10, doc="absolute residual tolerance of the nonlinear iteration", gt=0)
     tau_freeze: float = param(0.0, doc="keep τ (eqs 6–10) fixed for the rest of a step once the residual has dropped "

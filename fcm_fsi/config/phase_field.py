@@ -56,7 +56,9 @@ class PhaseFieldConfig:
             "and shape errors converge at first order; unset: γ independent of h (the paper)")
     supg: bool = param(True, doc="SUPG stabilization with τ_φ of eq 15")
     picard_tolerance: float = param(1e-6, doc="Picard iterations stop when max |φ_k+1 − φ_k| falls below this", gt=0, lt=1)
-    picard_max_iterations: int = param(10, doc="most Picard iterations per step; more is a divergence error", ge=1, le=100)
+    picard_max_iterations: int = param(10, doc="most Picard iterations per step; more is a divergence error. 1 = one "
+                                               "solve linearised about the extrapolated φ* = 3/2 φⁿ − 1/2 φⁿ⁻¹ "
+                                               "(second order, no iteration and no change test)", ge=1, le=100)
     volume_correction: bool = param(False, doc="shift the interface by L_err = V_err/A every step (eqs 16–17)")
     initial: InitialShape = param(doc="initial liquid region")
     velocity: PrescribedVelocity | None = param(None, doc="prescribed advecting velocity; omit when the fluid section provides it")

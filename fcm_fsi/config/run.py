@@ -20,6 +20,9 @@ class RunConfig:
                                   "oscillation grow and kick the block in block_overturn (docs/two-phase.md)",
                                   gt=0, le=10)
     dt_max: float | None = param(None, unit="s", doc="upper bound on the adapted dt (defaults to dt)", gt=0)
+    dt_growth: float | None = param(None, doc="with cfl: the adapted dt grows by at most this factor per step "
+                                    "(from run.dt at the start), so a flow starting from rest is resolved while it "
+                                    "accelerates (unset: no limit)", gt=1, le=10)
     log_every: int = param(10, unit="steps", doc="progress line every this many steps", ge=1)
     output_every: int = param(10, unit="steps", doc="XDMF field output every this many steps (0 = only first and last)", ge=0)
     checkpoint_every: int = param(100, unit="steps", doc="HDF5 checkpoint every this many steps (and always at the end)", ge=1)

@@ -87,12 +87,15 @@ class Model(Protocol):
     def load_state(self, checkpoint) -> None: ...
 
 
-def next_dt(case: Case, model: Model, t: float) -> float:
-    """Δt for the next step: fixed, or CFL-limited up to dt_max; never past t_end."""
+def next_dt(case: Case, model: Model, t: float, last_dt: float | None = None) -> float:
+    """Δt for the next step: fixed, or CFL-limited up to dt_max and, with ``run.dt_growth``, to
+    that factor times the last step ``last_dt``; never past t_end."""
     run = case.run
     dt = run.dt
     if run.cfl is not None:
         dt = min(run.dt_max or run.dt, model.stable_dt(run.cfl))
+        if run.dt_growth is not None and last_dt is not None:
+            dt = min(dt, run.dt_growth * last_dt)
     remaining = run.t_end - t
     if remaining <= dt * (1 + 1e-6):      # last step lands on t_end
         return remaining
@@ -121,10 +124,11 @@ class TimeLoop:
         self.fingerprint = case_fingerprint(case)
         self.timer = StageTimer()
         self.step, self.t = 0, 0.0
+        self.last_dt = case.run.dt        # the step before the next one (run.dt_growth)
         if restart:
             ck = read_checkpoint(Path(restart), comm, accepted_fingerprints(case))
             model.load_state(ck)
-            self.step, self.t = ck.step, ck.time
+            self.step, self.t, self.last_dt = ck.step, ck.time, ck.dt
             log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)
         self.series = TimeSeriesCSV(self.out / "series.csv", {"step": "-", "t": "s", "dt": "s", **model.series_units},
                                     comm.rank, append=bool(restart), resume_at=self.t if restart else None)
@@ -213,7 +217,7 @@ class TimeLoop:
                 self.write_fields()
         dt = run.dt
         while self.t < run.t_end * (1 - 1e-12):
-            dt = next_dt(self.case, self.model, self.t)
+            dt = next_dt(self.case, self.model, self.t, self.last_dt)
             try:
                 self.model.advance(self.t, dt, self.timer)
             except (SimulationDiverged, LinearSolveError, NonlinearSolveError, FloatingPointError) as err:
@@ -223,6 +227,7 @@ class TimeLoop:
                                          f"last good checkpoint: {self.out / 'checkpoint.h5'}") from err
             self.step += 1
             self.t += dt
+            self.last_dt = dt
             with self.timer("diagnostics"):
                 diag = self.model.diagnostics()
             problem = self.model.health(diag)

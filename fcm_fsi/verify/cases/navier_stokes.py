@@ -66,14 +66,14 @@ def _tg_exact(nu: float):
     return u
 
 
-def _taylor_green_run(comm, n: int, dt: float, t_end: float, nu: float, tm=None):
+def _taylor_green_run(comm, n: int, dt: float, t_end: float, nu: float, tm=None, nonlinear: str = "newton"):
     """Solve TG on [0,1]² with exact Dirichlet data; returns (solver, L2 velocity error at t_end).
 
     Pass the same ``tm`` to compare runs node by node (the partition is then identical).
     """
     if tm is None:
         tm = channel.rectangle(comm, (0.0, 0.0), (1.0, 1.0), (n, n), diagonal="crossed")
-    cfg = FluidConfig(density=1.0, viscosity=nu, rtol=1e-10, atol=1e-13)
+    cfg = FluidConfig(density=1.0, viscosity=nu, rtol=1e-10, atol=1e-13, nonlinear=nonlinear)
     exact = _tg_exact(nu)
     ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names,
                       velocity_functions={b: exact for b in ("left", "right", "bottom", "top")})

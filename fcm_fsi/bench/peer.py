@@ -1,0 +1,103 @@
+"""Peer benchmark (not a test): our two-phase step against OpenFOAM's interFoam in one run.
+
+    python -m fcm_fsi.bench peer [--levels quick full] [--np 1] [--out bench_peer]
+
+Case: Martin & Moyce's dam break (``verify dam_break``): quick = a/8 (48 × 20 cells), full =
+a/20 (120 × 50 cells), to T = 3.47. Ours runs as a user would, ``python -m fcm_fsi.verify
+dam_break --level L --np N`` in a fresh process; interFoam (when on PATH; Debian packages
+``openfoam`` and ``openfoam-examples``, optional) runs the same tank with the same number of
+cells (quads, one cell thick, slip walls, the laminar damBreak tutorial's numerics). For each:
+process wall time, solver wall time (our model set-up and time loop; interFoam's run), time
+steps, and the accuracy measure the verification checks — the mean front deviation from
+Martin & Moyce unshifted and after the best delay of the experiment's clock. The ratio is ours
+over interFoam's, process against process and solver against solver. Run it on an idle machine
+with warm JIT caches (run it twice; the first run compiles the forms).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from ..verify.__main__ import mpi_env
+from ..verify.cases.two_phase import (DAM, DAM_HEIGHT, DAM_LENGTH, G, MM_A, MM_N2, T_FRONT_MAX, best_time_shift,
+                                      front_deviation)
+from . import _openfoam
+
+
+def dam_break_t_end() -> float:
+    """End time of the verification case [s]: 5 % past T = 3.3."""
+    return 1.05 * T_FRONT_MAX / (math.sqrt(MM_N2) * math.sqrt(G / MM_A))
+
+
+def ours(level: str, ranks: int, out: Path) -> dict:
+    """Run ``verify dam_break`` in a fresh process; its wall, steps and front metrics."""
+    cmd = [sys.executable, "-m", "fcm_fsi.verify", "dam_break", "--level", level, "--np", str(ranks),
+           "--out", str(out)]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, env=mpi_env(), check=False, stdout=subprocess.DEVNULL)
+    process = time.perf_counter() - t0
+    metrics = json.loads((out / "dam_break" / "metrics.json").read_text())["metrics"]
+    steps = int(metrics["wall_time"]["criterion"].split(" steps")[0].split()[-1])
+    return {"process": process, "solver": metrics["wall_time"]["value"], "steps": steps,
+            "dev": metrics["front_mean_abs_dev"]["value"], "dev_shifted": metrics["front_mean_abs_dev_shifted"]["value"],
+            "shift": metrics["front_time_shift"]["value"]}
+
+
+def interfoam(level: str, ranks: int, out: Path) -> dict:
+    """The same tank and cell count in interFoam; wall (process and interFoam alone), steps, front metrics."""
+    per_a = DAM[level]["per_a"]
+    cells_x, cells_y = round(DAM_LENGTH / (MM_A / per_a)), round(DAM_HEIGHT / (MM_A / per_a))
+    t0 = time.perf_counter()
+    res = _openfoam.dam_break_2d(cells_x, cells_y, out / f"interfoam_{level}", dam_break_t_end(), np=ranks)
+    process = time.perf_counter() - t0
+    T = math.sqrt(MM_N2) * res["t"] * math.sqrt(G / MM_A)
+    Z = res["front"] / MM_A
+    shift, dev_shifted = best_time_shift(T, Z)
+    return {"process": process, "solver": res["wall"], "steps": res["steps"], "dev": front_deviation(T, Z),
+            "dev_shifted": dev_shifted, "shift": shift}
+
+
+def table(rows: list[tuple[str, int, dict, dict | None]]) -> str:
+    head = (f"{'case':<22}{'ranks':>5}  {'who':<10}{'process s':>10}{'solver s':>10}{'steps':>7}"
+            f"{'|ΔZ|':>8}{'|ΔZ| shifted':>14}{'ΔT':>7}")
+    lines = [head]
+    for name, ranks, a, b in rows:
+        for who, r in (("fcm_fsi", a), ("interFoam", b)):
+            if r is None:
+                lines.append(f"{name:<22}{ranks:>5}  {who:<10}  (not on PATH: apt-get install openfoam openfoam-examples)")
+                continue
+            lines.append(f"{name:<22}{ranks:>5}  {who:<10}{r['process']:>10.2f}{r['solver']:>10.2f}{r['steps']:>7d}"
+                         f"{r['dev']:>8.3f}{r['dev_shifted']:>14.4f}{r['shift']:>7.3f}")
+        if b is not None:
+            lines.append(f"{'':<22}{'':>5}  {'ratio':<10}{a['process'] / b['process']:>10.2f}"
+                         f"{a['solver'] / b['solver']:>10.2f}{a['steps'] / b['steps']:>7.2f}")
+    return "\n".join(lines)
+
+
+def run(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.bench peer", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--levels", nargs="+", choices=sorted(DAM), default=["quick", "full"])
+    ap.add_argument("--np", type=int, nargs="+", default=[1], help="rank counts (each level is run on each)")
+    ap.add_argument("--out", type=Path, default=Path("bench_peer"))
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    have_foam = _openfoam.interfoam_available()
+    rows = []
+    for level in args.levels:
+        for ranks in args.np:
+            name = f"dam_break a/{DAM[level]['per_a']}"
+            a = ours(level, ranks, args.out / f"ours_{level}_np{ranks}")
+            b = interfoam(level, ranks, args.out / f"np{ranks}") if have_foam else None
+            rows.append((name, ranks, a, b))
+            print(table(rows[-1:]).split("\n", 1)[1], flush=True)
+    text = table(rows)
+    print("\n" + text)
+    (args.out / "peer.txt").write_text(text + "\n")
+    (args.out / "peer.json").write_text(json.dumps([{"case": n, "ranks": r, "fcm_fsi": a, "interfoam": b}
+                                                    for n, r, a, b in rows], indent=1))
+    return 0
