@@ -19,7 +19,8 @@ lie in horizontal layers its P1 interpolant is then exactly the gradient of a P2
 rest the residual that drives spurious currents is the curl part of ρ f only. In motion the
 two discretisations differ by discretisation error (tested on the verification cases).
 
-Cost: one P2 Poisson solve per time step (MUMPS in 2D, CG + BoomerAMG in 3D), when ρ changes.
+Cost: one P2 Poisson solve per time step when ρ changes: in 2D triangular solves with the factorisation
+made once (PETSc Cholesky on one rank, MUMPS on more), in 3D CG + BoomerAMG.
 """
 from __future__ import annotations
 
@@ -31,8 +32,12 @@ from petsc4py import PETSc
 
 from . import solvers
 
-#: P2 Poisson solve; tight, because the solve error of Π acts as a force on the fluid
+#: P2 Poisson solve; tight, because the solve error of Π acts as a force on the fluid. The matrix
+#: never changes, so the factorisation is made once and each update is a pair of triangular
+#: solves: on one rank PETSc's own Cholesky (nested dissection) does them ≈ 4× faster than MUMPS
 DIRECT = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
+DIRECT_SERIAL = {"ksp_type": "preonly", "pc_type": "cholesky", "pc_factor_mat_solver_type": "petsc",
+                 "pc_factor_mat_ordering_type": "nd"}
 ITERATIVE = {"ksp_type": "cg", "ksp_rtol": 1e-12, "ksp_atol": 1e-14, "ksp_max_it": 500,
              "pc_type": "hypre", "pc_hypre_type": "boomeramg"}
 
@@ -72,7 +77,8 @@ class StaticPressure:
         self.A = fem.petsc.assemble_matrix(self._a, bcs=self.bcs)
         self.A.assemble()
         self.b = fem.petsc.create_vector(self._L)
-        opts = dict(DIRECT if mesh.geometry.dim == 2 else ITERATIVE)
+        direct = DIRECT_SERIAL if self.comm.size == 1 else DIRECT
+        opts = dict(direct if mesh.geometry.dim == 2 else ITERATIVE)
         self.ksp = solvers.make_ksp(self.comm, self.A, "static_p_", opts)
         self.p1 = fem.Function(ns.Q)   # Π interpolated to the P1 pressure nodes (output)
 
