@@ -199,3 +199,33 @@ def test_unreadable_mesh_files_are_bad_input(tmp_path):
                        "--set", f"mesh.file={path}", "--set", "run.t_end=0.02"], np_=2, timeout=120)
         assert res.returncode == 2, res.stderr[-2000:]
         assert "mesh.file" in res.stderr and message in res.stderr and "Traceback" not in res.stderr
+
+
+def test_graded_refine_zone_grows_its_cells_away_from_the_zone():
+    """A refine zone with ``grading``: the gmsh cells below it grow about linearly with the
+    distance, size + grading · d, instead of jumping from 0.0025 to 0.04 at its edge (the jump
+    that made the sloshing tank's 0.0025 band unstable); the size law agrees."""
+    def mesh(grading):
+        zone = {"lower": [0.0, 0.96], "upper": [1.0, 1.04], "size": 0.005, **({"grading": grading} if grading else {})}
+        cfg = build(MeshConfig, {"kind": "gmsh_box", "lower": [0.0, 0.0], "upper": [1.0, 1.4], "size": 0.04,
+                                 "refine": [zone]}, "mesh")
+        msh = build_mesh(cfg, MPI.COMM_WORLD)
+        cells = msh.geometry.dofmap.array.reshape(-1, 3)
+        y = msh.geometry.x[cells, 1].mean(axis=1)
+        return cfg, y, cell_sizes(msh)
+    cfg, y, h = mesh(0.5)
+    for d in (0.02, 0.04):                       # cells centred d below the zone
+        near = np.abs(y - (0.96 - d)) < 0.004
+        expected = 0.005 + 0.5 * d
+        assert np.median(h[near]) == pytest.approx(expected, rel=0.35), (d, np.median(h[near]))
+    _, y0, h0 = mesh(None)
+    graded_below, plain_below = np.median(h[np.abs(y - 0.95) < 0.005]), np.median(h0[np.abs(y0 - 0.95) < 0.005])
+    assert plain_below > 2 * graded_below, (plain_below, graded_below)   # ungraded: ≈ the coarse size already
+    law = cell_size_function(build(MeshConfig, {**{k: getattr(cfg, k) for k in ("kind", "lower", "upper", "size")},
+                                                "refine": [{"lower": [0.0, 0.96], "upper": [1.0, 1.04], "size": 0.005,
+                                                            "grading": 0.5}],
+                                                "structure_band": {"size": 0.03, "grading": 0.5}}, "mesh"),
+                             lambda x, y, z: 10.0)
+    assert law(0.5, 1.0, 0.0) == pytest.approx(0.005)
+    assert law(0.5, 0.92, 0.0) == pytest.approx(0.025)
+    assert law(0.5, 0.5, 0.0) == pytest.approx(0.04)

@@ -15,6 +15,9 @@ class RefineZone:
     lower: tuple[float, ...] = param(unit="m", doc="lower corner of the zone")
     upper: tuple[float, ...] = param(unit="m", doc="upper corner of the zone")
     size: float = param(unit="m", doc="cell size inside the zone", gt=0)
+    grading: float | None = param(None, doc="outside the zone the cell size grows by this much per metre of "
+                                  "distance from it, up to mesh.size (unset: it jumps to mesh.size at the zone's "
+                                  "edge; a jump of 10× or more leaves badly shaped cells there)", gt=0, le=10)
 
 
 @dataclass(frozen=True, kw_only=True)

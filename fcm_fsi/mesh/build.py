@@ -150,6 +150,8 @@ def _refine_fields(cfg: MeshConfig) -> int:
         zu = list(zone.upper) + [0.0] * (3 - len(zone.upper))
         gmsh.model.mesh.field.setNumber(f, "VIn", zone.size)
         gmsh.model.mesh.field.setNumber(f, "VOut", cfg.size)
+        if zone.grading is not None:       # linear from VIn at the box to VOut this far out
+            gmsh.model.mesh.field.setNumber(f, "Thickness", max(cfg.size - zone.size, 0.0) / zone.grading)
         for ax, a, b in zip("XYZ", zl, zu):
             gmsh.model.mesh.field.setNumber(f, f"{ax}Min", a)
             gmsh.model.mesh.field.setNumber(f, f"{ax}Max", b)
@@ -162,22 +164,26 @@ def _refine_fields(cfg: MeshConfig) -> int:
 def cell_size_function(cfg: MeshConfig, face_distance: Callable[[float, float, float], float] | None
                        ) -> Callable[[float, float, float], float] | None:
     """The target cell size h(x) [m] of a mesh with ``mesh.structure_band`` (None without one):
-    h = min(mesh.size, band.size + band.grading · d(x), the size of every refine zone
-    containing x), d = ``face_distance(x, y, z)`` [m] to the structure's faces."""
+    h = min(mesh.size, band.size + band.grading · d(x), the size of every refine zone at x),
+    d = ``face_distance(x, y, z)`` [m] to the structure's faces; a refine zone's size is its
+    ``size`` inside it and, with a ``grading``, size + grading · (distance to the zone) outside."""
     band = cfg.structure_band
     if band is None:
         return None
     if face_distance is None:
         raise ConfigError("key 'mesh.structure_band' needs the structure's blocks (a coupled case)")
     size, h0, g, dim = cfg.size, band.size, band.grading, cfg.dim
-    zones = [(tuple(z.lower), tuple(z.upper), z.size) for z in cfg.refine]
+    zones = [(np.array(z.lower), np.array(z.upper), z.size, z.grading) for z in cfg.refine]
 
     def size_at(x: float, y: float, z: float) -> float:
         h = min(size, h0 + g * face_distance(x, y, z))
-        p = (x, y, z)[:dim]
-        for zl, zu, zs in zones:
-            if zs < h and all(a <= c <= b for a, c, b in zip(zl, p, zu)):
-                h = zs
+        p = np.array((x, y, z)[:dim])
+        for zl, zu, zs, zg in zones:
+            outside = float(np.linalg.norm(np.maximum(0.0, np.maximum(zl - p, p - zu))))
+            if outside == 0.0:
+                h = min(h, zs)
+            elif zg is not None:
+                h = min(h, zs + zg * outside)
         return h
 
     return size_at
