@@ -1,6 +1,7 @@
 """Peer benchmark (not a test): our two-phase step against OpenFOAM's interFoam in one run.
 
     python -m fcm_fsi.bench peer [--levels quick full] [--np 1] [--out bench_peer]
+    python -m fcm_fsi.bench peer --impact 0.23 1.0 --np 2      (3D dam break onto a fixed box)
 
 Case: Martin & Moyce's dam break (``verify dam_break``): quick = a/8 (48 × 20 cells), full =
 a/20 (120 × 50 cells), to T = 3.47. Ours runs as a user would, ``python -m fcm_fsi.verify
@@ -22,6 +23,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 from ..verify.__main__ import mpi_env
 from ..verify.cases.two_phase import (DAM, DAM_HEIGHT, DAM_LENGTH, G, MM_A, MM_N2, T_FRONT_MAX, best_time_shift,
@@ -62,6 +65,65 @@ def interfoam(level: str, ranks: int, out: Path) -> dict:
             "dev_shifted": dev_shifted, "shift": shift}
 
 
+IMPACT_CASE = Path(__file__).resolve().parents[2] / "cases" / "impact_box_3d.yaml"
+#: the fast step for the 3D impact (coupled: the block is fixed)
+IMPACT_FAST = ("fluid.nonlinear=linearised", "phase_field.picard_max_iterations=1", "output.xdmf=false")
+
+
+def hex_size(cells: int) -> float:
+    """Edge [m] of cubes that fill impact_box_3d's tank less the box (284.8 m³) with ``cells`` cells."""
+    return ((12.0 * 4.0 * 6.0 - 1.0 * 1.6 * 2.0) / cells) ** (1.0 / 3.0)
+
+
+def impact_ours(size: float, t_end: float, ranks: int, out: Path) -> dict:
+    """``cases/impact_box_3d.yaml`` with cells of ``size`` [m] and the fast step, under mpirun;
+    wall (process, and the time loop's 'total wall'), steps, tetrahedra and the box's force history."""
+    cmd = ["mpirun", "-n", str(ranks), sys.executable, "-m", "fcm_fsi", str(IMPACT_CASE), "--output", str(out),
+           "--log-level", "INFO", "--set", f"mesh.size={size}", "--set", f"run.t_end={t_end}"]
+    for item in IMPACT_FAST:
+        cmd += ["--set", item]
+    t0 = time.perf_counter()
+    res = subprocess.run(cmd, env=mpi_env(), capture_output=True, text=True)
+    process = time.perf_counter() - t0
+    if res.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr[-3000:]}")
+    log = res.stdout + res.stderr
+    solver = float(log.split("total wall")[1].split()[0])
+    cells = int(log.split("mesh gmsh_box: ")[1].split()[0])
+    data = np.genfromtxt(out / "bodies.csv", delimiter=",", names=True)
+    return {"process": process, "solver": solver, "steps": len(data), "cells": cells,
+            "t": data["t_s"], "fx": data["fx_N"]}
+
+
+def impact_interfoam(size: float, t_end: float, ranks: int, out: Path) -> dict:
+    t0 = time.perf_counter()
+    res = _openfoam.impact_box_3d(size, out, t_end, np=ranks)
+    return {"process": time.perf_counter() - t0, "solver": res["wall"], "steps": res["steps"],
+            "cells": res["cells"], "t": res["t"], "fx": res["force"][:, 0]}
+
+
+def load_measures(r: dict) -> dict:
+    """Peak streamwise force [N], its time [s] and the impulse ∫ F_x dt [N s] of a run."""
+    i = int(np.argmax(r["fx"]))
+    return {"peak": float(r["fx"][i]), "t_peak": float(r["t"][i]), "impulse": float(np.trapz(r["fx"], r["t"]))}
+
+
+def impact_table(size: float, ranks: int, a: dict, b: dict | None) -> str:
+    lines = [f"{'impact_box_3d':<16}{'ranks':>5}  {'who':<10}{'cells':>9}{'process s':>10}{'solver s':>10}{'steps':>7}"
+             f"{'peak F_x N':>12}{'at s':>7}{'impulse N s':>13}"]
+    for who, r in (("fcm_fsi", a), ("interFoam", b)):
+        if r is None:
+            lines.append(f"{'':<16}{ranks:>5}  {who:<10}  (not on PATH)")
+            continue
+        m = load_measures(r)
+        lines.append(f"{'':<16}{ranks:>5}  {who:<10}{r['cells']:>9d}{r['process']:>10.1f}{r['solver']:>10.1f}"
+                     f"{r['steps']:>7d}{m['peak']:>12.0f}{m['t_peak']:>7.3f}{m['impulse']:>13.0f}")
+    if b is not None:
+        lines.append(f"{'':<16}{'':>5}  {'ratio':<10}{'':>9}{a['process'] / b['process']:>10.2f}"
+                     f"{a['solver'] / b['solver']:>10.2f}{a['steps'] / b['steps']:>7.2f}")
+    return "\n".join(lines)
+
+
 def table(rows: list[tuple[str, int, dict, dict | None]]) -> str:
     head = (f"{'case':<22}{'ranks':>5}  {'who':<10}{'process s':>10}{'solver s':>10}{'steps':>7}"
             f"{'|ΔZ|':>8}{'|ΔZ| shifted':>14}{'ΔT':>7}")
@@ -84,9 +146,27 @@ def run(argv: list[str]) -> int:
     ap.add_argument("--levels", nargs="+", choices=sorted(DAM), default=["quick", "full"])
     ap.add_argument("--np", type=int, nargs="+", default=[1], help="rank counts (each level is run on each)")
     ap.add_argument("--out", type=Path, default=Path("bench_peer"))
+    ap.add_argument("--impact", type=float, nargs=2, metavar=("SIZE", "T_END"),
+                    help="instead: the 3D dam break onto a fixed box (cases/impact_box_3d.yaml) with cells of "
+                         "SIZE m (0.23: 114k tetrahedra) to T_END s, interFoam with as many hex cells")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     have_foam = _openfoam.interfoam_available()
+    if args.impact:
+        size, t_end = args.impact
+        texts = []
+        for ranks in args.np:
+            a = impact_ours(size, t_end, ranks, args.out / f"ours_impact_np{ranks}")
+            b = impact_interfoam(hex_size(a["cells"]), t_end, ranks, args.out / f"interfoam_impact_np{ranks}") if have_foam else None
+            texts.append(impact_table(size, ranks, a, b))
+            print(texts[-1], flush=True)
+            np.savetxt(args.out / f"impact_np{ranks}_fcm_fsi.csv", np.c_[a["t"], a["fx"]], delimiter=",",
+                       header="t [s],fx [N]")
+            if b is not None:
+                np.savetxt(args.out / f"impact_np{ranks}_interfoam.csv", np.c_[b["t"], b["fx"]], delimiter=",",
+                           header="t [s],fx [N]")
+        (args.out / "peer_impact.txt").write_text("\n".join(texts) + "\n")
+        return 0
     rows = []
     for level in args.levels:
         for ranks in args.np:
