@@ -88,6 +88,7 @@ def impact_ours(size: float, t_end: float, ranks: int, out: Path) -> dict:
     if res.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{res.stderr[-3000:]}")
     log = res.stdout + res.stderr
+    (out / "run.log").write_text(log)
     solver = float(log.split("total wall")[1].split()[0])
     cells = int(log.split("mesh gmsh_box: ")[1].split()[0])
     data = np.genfromtxt(out / "bodies.csv", delimiter=",", names=True)

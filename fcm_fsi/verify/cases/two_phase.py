@@ -111,9 +111,11 @@ def still_water_case(cells: int, dt: float, t_end: float = 1.0) -> dict:
         "run": {"t_end": t_end, "dt": dt, "cfl": 0.5, "dt_max": dt, "log_every": 100, "checkpoint_every": 10 ** 6},
         "mesh": {"kind": "rectangle", "lower": [0.0, 0.0], "upper": [1.0, STILL_HEIGHT], "cells": [cells, cells]},
         "phase_field": {"width_factor": 0.6, "volume_correction": False, "reference_velocity": 1.0e-3,
+                        **FAST_STEP["phase_field"],
                         "initial": {"shape": "box", "lower": [-1.0, -1.0], "upper": [2.0, STILL_DEPTH]}},
         "fluid": {**WATER_AIR, "gravity": [0.0, -G], "pressure_reference": [0.0, STILL_HEIGHT],
-                  "boundaries": slip_walls(("left", "right", "bottom"), "no_slip") + slip_walls(("top",))},
+                  "boundaries": slip_walls(("left", "right", "bottom"), "no_slip") + slip_walls(("top",)),
+                  "nonlinear": FAST_STEP["fluid"]["nonlinear"]},
         "output": {"xdmf": False, "checkpoint": False},
     }
 
@@ -190,11 +192,11 @@ def sloshing_case(size: float, band: float, dt: float, t_end: float, half_width:
                  "refine": [{"lower": [0.0, SLOSH_DEPTH - half_width], "upper": [1.0, SLOSH_DEPTH + half_width],
                              "size": band, "grading": SLOSH_BAND_GRADING}]},
         "phase_field": {"width_factor": 1.0, "volume_correction": True, "reference_velocity": 0.02,
-                        "picard_max_iterations": 1,
+                        **FAST_STEP["phase_field"],
                         "initial": {"shape": "surface_wave", "depth": SLOSH_DEPTH, "amplitude": 0.01, "length": 1.0}},
         "fluid": {"density": 1.0, "viscosity": 1.0e-5, "gas_density": 0.1, "gas_viscosity": 1.0e-6,
                   "gravity": [0.0, -1.0], "pressure_reference": [0.0, SLOSH_HEIGHT], "boundaries": slip_walls(),
-                  "nonlinear": "linearised"},
+                  "nonlinear": FAST_STEP["fluid"]["nonlinear"]},
         "output": {"xdmf": False, "checkpoint": False},
     }
 
