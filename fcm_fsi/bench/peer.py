@@ -109,6 +109,13 @@ def load_measures(r: dict) -> dict:
     return {"peak": float(r["fx"][i]), "t_peak": float(r["t"][i]), "impulse": float(np.trapz(r["fx"], r["t"]))}
 
 
+def ratio_row(pad: int, a: dict, b: dict, gap: int = 0) -> str:
+    """The line of ours / interFoam's process time, solver time and steps: ``pad`` blank columns,
+    the label, ``gap`` blank columns, the ratios."""
+    return (f"{'':<{pad}}{'ratio':<10}{'':<{gap}}{a['process'] / b['process']:>10.2f}"
+            f"{a['solver'] / b['solver']:>10.2f}{a['steps'] / b['steps']:>7.2f}")
+
+
 def impact_table(size: float, ranks: int, a: dict, b: dict | None) -> str:
     lines = [f"{'impact_box_3d':<16}{'ranks':>5}  {'who':<10}{'cells':>9}{'process s':>10}{'solver s':>10}{'steps':>7}"
              f"{'peak F_x N':>12}{'at s':>7}{'impulse N s':>13}"]
@@ -120,8 +127,7 @@ def impact_table(size: float, ranks: int, a: dict, b: dict | None) -> str:
         lines.append(f"{'':<16}{ranks:>5}  {who:<10}{r['cells']:>9d}{r['process']:>10.1f}{r['solver']:>10.1f}"
                      f"{r['steps']:>7d}{m['peak']:>12.0f}{m['t_peak']:>7.3f}{m['impulse']:>13.0f}")
     if b is not None:
-        lines.append(f"{'':<16}{'':>5}  {'ratio':<10}{'':>9}{a['process'] / b['process']:>10.2f}"
-                     f"{a['solver'] / b['solver']:>10.2f}{a['steps'] / b['steps']:>7.2f}")
+        lines.append(ratio_row(16 + 5 + 2, a, b, gap=9))
     return "\n".join(lines)
 
 
@@ -137,8 +143,7 @@ def table(rows: list[tuple[str, int, dict, dict | None]]) -> str:
             lines.append(f"{name:<22}{ranks:>5}  {who:<10}{r['process']:>10.2f}{r['solver']:>10.2f}{r['steps']:>7d}"
                          f"{r['dev']:>8.3f}{r['dev_shifted']:>14.4f}{r['shift']:>7.3f}")
         if b is not None:
-            lines.append(f"{'':<22}{'':>5}  {'ratio':<10}{a['process'] / b['process']:>10.2f}"
-                         f"{a['solver'] / b['solver']:>10.2f}{a['steps'] / b['steps']:>7.2f}")
+            lines.append(ratio_row(22 + 5 + 2, a, b))
     return "\n".join(lines)
 
 
