@@ -173,15 +173,17 @@ def cell_size_function(cfg: MeshConfig, face_distance: Callable[[float, float, f
     if face_distance is None:
         raise ConfigError("key 'mesh.structure_band' needs the structure's blocks (a coupled case)")
     size, h0, g, dim = cfg.size, band.size, band.grading, cfg.dim
-    zones = [(np.array(z.lower), np.array(z.upper), z.size, z.grading) for z in cfg.refine]
+    zones = [(tuple(z.lower), tuple(z.upper), z.size, z.grading) for z in cfg.refine]
 
-    def size_at(x: float, y: float, z: float) -> float:
+    def size_at(x: float, y: float, z: float) -> float:     # called by gmsh at every mesh point: plain floats
         h = min(size, h0 + g * face_distance(x, y, z))
-        p = np.array((x, y, z)[:dim])
+        p = (x, y, z)[:dim]
         for zl, zu, zs, zg in zones:
-            outside = float(np.linalg.norm(np.maximum(0.0, np.maximum(zl - p, p - zu))))
+            if zs >= h:
+                continue
+            outside = sum(max(a - c, c - b, 0.0) ** 2 for a, c, b in zip(zl, p, zu)) ** 0.5
             if outside == 0.0:
-                h = min(h, zs)
+                h = zs
             elif zg is not None:
                 h = min(h, zs + zg * outside)
         return h
