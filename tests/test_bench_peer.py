@@ -37,3 +37,9 @@ def test_impact_hex_size_fills_the_tank_with_the_given_cells():
     assert (12 * 4 * 6 - 1 * 1.6 * 2) / size ** 3 == pytest.approx(114_124)
     assert peer.ratio_row(2, {"process": 4.0, "solver": 3.0, "steps": 10}, {"process": 2.0, "solver": 1.0, "steps": 5}) \
         .split() == ["ratio", "2.00", "3.00", "2.00"]
+
+
+def test_repeated_runs_report_the_median_times():
+    runs = [{"process": p, "solver": s, "steps": 76, "dev": 0.3} for p, s in ((9.0, 7.0), (12.0, 9.0), (10.0, 8.5))]
+    m = peer.median_run(runs)
+    assert (m["process"], m["solver"], m["steps"], m["repeats"]) == (10.0, 8.5, 76, 3)
