@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import subprocess
 import sys
 import time
@@ -27,14 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from ..verify.__main__ import mpi_env
-from ..verify.cases.two_phase import (DAM, DAM_HEIGHT, DAM_LENGTH, G, MM_A, MM_N2, T_FRONT_MAX, best_time_shift,
-                                      front_deviation)
+from ..verify.cases.two_phase import (DAM, best_time_shift, dam_break_cells, dam_break_t_end, front_deviation,
+                                      front_scaled)
 from . import _openfoam
-
-
-def dam_break_t_end() -> float:
-    """End time of the verification case [s]: 5 % past T = 3.3."""
-    return 1.05 * T_FRONT_MAX / (math.sqrt(MM_N2) * math.sqrt(G / MM_A))
 
 
 def ours(level: str, ranks: int, out: Path) -> dict:
@@ -53,13 +47,11 @@ def ours(level: str, ranks: int, out: Path) -> dict:
 
 def interfoam(level: str, ranks: int, out: Path) -> dict:
     """The same tank and cell count in interFoam; wall (process and interFoam alone), steps, front metrics."""
-    per_a = DAM[level]["per_a"]
-    cells_x, cells_y = round(DAM_LENGTH / (MM_A / per_a)), round(DAM_HEIGHT / (MM_A / per_a))
+    cells_x, cells_y = dam_break_cells(DAM[level]["per_a"])
     t0 = time.perf_counter()
     res = _openfoam.dam_break_2d(cells_x, cells_y, out / f"interfoam_{level}", dam_break_t_end(), np=ranks)
     process = time.perf_counter() - t0
-    T = math.sqrt(MM_N2) * res["t"] * math.sqrt(G / MM_A)
-    Z = res["front"] / MM_A
+    T, Z = front_scaled(res["t"], res["front"])
     shift, dev_shifted = best_time_shift(T, Z)
     return {"process": process, "solver": res["wall"], "steps": res["steps"], "dev": front_deviation(T, Z),
             "dev_shifted": dev_shifted, "shift": shift}
@@ -97,6 +89,7 @@ def impact_ours(size: float, t_end: float, ranks: int, out: Path) -> dict:
 
 
 def impact_interfoam(size: float, t_end: float, ranks: int, out: Path) -> dict:
+    """The impact case in interFoam with hex cells of ``size`` [m]; as :func:`impact_ours`."""
     t0 = time.perf_counter()
     res = _openfoam.impact_box_3d(size, out, t_end, np=ranks)
     return {"process": time.perf_counter() - t0, "solver": res["wall"], "steps": res["steps"],

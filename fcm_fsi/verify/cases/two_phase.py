@@ -279,6 +279,7 @@ def _sloshing(p: dict, out: Path, comm: MPI.Comm, thickness: float | None = None
         model, s, wall = run_two_phase(data, out, comm)
         runs.append((band, model, s, wall, period_from_gauge(s["t"], s["level_left"] - SLOSH_DEPTH)))
     band, model, s, wall, period = runs[-1]          # the finest band
+    wall_total = sum(r[3] for r in runs)
     t, eta_l, eta_r = s["t"], s["level_left"] - SLOSH_DEPTH, s["level_right"] - SLOSH_DEPTH
     a0 = abs(eta_l[0])
     if p["periods"] >= 5:
@@ -298,7 +299,7 @@ def _sloshing(p: dict, out: Path, comm: MPI.Comm, thickness: float | None = None
         ax.plot(t, a0 * np.cos(2 * np.pi * t / t_two), "k--", lw=1, label=f"two-layer theory, T = {t_two:.4f}")
         ax.set_xlabel("t [s]"); ax.set_ylabel("η [m]"); ax.legend(fontsize=7, loc="lower left"); ax.grid(alpha=0.3)
         ax.set_title(f"sloshing{' 3D' if thickness else ''}: Δt = {p['dt']}, {comm.size} rank(s), "
-                     f"wall {sum(r[3] for r in runs):.0f} s", fontsize=10)
+                     f"wall {wall_total:.0f} s", fontsize=10)
         fig.tight_layout(); fig.savefig(out / ("sloshing_3d.png" if thickness else "sloshing.png"), dpi=110)
         plt.close(fig)
     fine = len(p["bands"]) > 1
@@ -317,7 +318,7 @@ def _sloshing(p: dict, out: Path, comm: MPI.Comm, thickness: float | None = None
                     note="max |η_left + η_right| / a0 (first mode: the gauges are in antiphase)"),
         report_only("u_max", float(s["u_max"].max()), unit="m/s",
                     note="largest speed (linear theory at the surface: a ω ≈ 0.016–0.018)"),
-        report_only("wall_time", sum(r[3] for r in runs), unit="s", note=f"bands {', '.join(f'{b:g}' for b in p['bands'])}; "
+        report_only("wall_time", wall_total, unit="s", note=f"bands {', '.join(f'{b:g}' for b in p['bands'])}; "
                     f"finest {cells} cells, {len(t) - 1} steps; {comm.size} rank(s)"),
     ]
 
@@ -352,10 +353,20 @@ DAM_LENGTH, DAM_HEIGHT = 6.0 * MM_A, 2.5 * MM_A
 T_FRONT_MAX = 3.3
 
 
+def dam_break_cells(per_a: int) -> list[int]:
+    """Cells along x and y of the 6a × 2.5a tank at h = a/``per_a``."""
+    h = MM_A / per_a
+    return [int(round(DAM_LENGTH / h)), int(round(DAM_HEIGHT / h))]
+
+
+def dam_break_t_end() -> float:
+    """End of the dam-break runs [s]: 5 % past T = 3.3, the last front point checked."""
+    return 1.05 * T_FRONT_MAX / (math.sqrt(MM_N2) * math.sqrt(G / MM_A))
+
+
 def dam_break_case(per_a: int, t_end: float) -> dict:
     """Martin & Moyce's tank at a/h = ``per_a`` with the fast step (:data:`FAST_STEP`)."""
-    h = MM_A / per_a
-    cells = [int(round(DAM_LENGTH / h)), int(round(DAM_HEIGHT / h))]
+    cells = dam_break_cells(per_a)
     return {
         "name": f"dam_break_{per_a}",
         "run": {"t_end": t_end, "dt": 1.0e-3, "log_every": 50, "checkpoint_every": 10 ** 6, **FAST_STEP["run"]},
@@ -392,10 +403,16 @@ def best_time_shift(T: np.ndarray, Z: np.ndarray) -> tuple[float, float]:
     return float(shifts[i]), dev[i]
 
 
+def front_scaled(t: np.ndarray, front: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Martin & Moyce's (T, Z) = (n t √(g/a), front/a) from times [s] and front positions [m]."""
+    return math.sqrt(MM_N2) * t * math.sqrt(G / MM_A), front / MM_A
+
+
 def dam_break_scaled(s: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(T, Z, τ, H) of Martin & Moyce from the series: Z = front/a, H = level at the left wall/(n² a)."""
     tau = s["t"] * math.sqrt(G / MM_A)
-    return math.sqrt(MM_N2) * tau, s["wetted_bottom"] / MM_A, tau, s["level_left"] / (MM_N2 * MM_A)
+    T, Z = front_scaled(s["t"], s["wetted_bottom"])
+    return T, Z, tau, s["level_left"] / (MM_N2 * MM_A)
 
 
 @register("dam_break", "Martin & Moyce (1952) water column n² = 2, a = 0.05715 m in air: front and "
@@ -421,8 +438,7 @@ def dam_break_3d(level: str, out: Path, comm: MPI.Comm) -> list[Metric]:
 
 
 def _dam_break(p: dict, out: Path, comm: MPI.Comm, dim: int = 2) -> list[Metric]:
-    t_end = 1.05 * T_FRONT_MAX / (math.sqrt(MM_N2) * math.sqrt(G / MM_A))
-    data = dam_break_case(p["per_a"], t_end)
+    data = dam_break_case(p["per_a"], dam_break_t_end())
     if dim == 3:
         data = thin_slab_3d(data, 2 * MM_A / p["per_a"], cells=2)
         data["run"]["cfl"] = p.get("cfl", data["run"]["cfl"])
