@@ -54,6 +54,12 @@ class PhaseFieldConfig:
         doc="if set, γ = mobility_factor · U · min(1, h_min/mobility_length): the mobility falls in proportion to "
             "the mesh size below this length, so the sharpening's tangential smoothing (diffusivity γε) falls as h² "
             "and shape errors converge at first order; unset: γ independent of h (the paper)")
+    width_floor: float | None = param(
+        None, gt=0, le=10,
+        doc="if set, the width in cell K is ε_K = max(ε, width_floor · h_K), h_K its longest edge: a mesh refined "
+            "around the interface and coarse elsewhere gets in its coarse cells the width they can carry (where "
+            "ε ≪ h the conservative sharpening flux amplifies φ's deviations from 0 and 1, docs/two-phase.md, sloshing); "
+            "0.5 leaves every cell up to 2ε untouched; unset: ε in every cell")
     supg: bool = param(True, doc="SUPG stabilization with τ_φ of eq 15")
     picard_tolerance: float = param(1e-6, doc="Picard iterations stop when max |φ_k+1 − φ_k| falls below this", gt=0, lt=1)
     picard_max_iterations: int = param(10, doc="most Picard iterations per step; more is a divergence error. 1 = one "

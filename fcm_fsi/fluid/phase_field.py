@@ -35,6 +35,7 @@ from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_vector
 from ..config.loader import ConfigError
 from ..config.phase_field import InitialShape, PhaseFieldConfig
 from ..fcm.cut import cut_measures
+from ..mesh.build import cell_sizes
 from .solvers import make_ksp, solve as solve_ksp
 
 # Quadrature degree per form: with the P1 nodal normal the conservative integrands are
@@ -60,6 +61,24 @@ def mobility(cfg: PhaseFieldConfig, velocity_scale: float, h_min: float) -> floa
 def interface_width(h_min: float, width_factor: float) -> float:
     """ε = width_factor · h_min [m]."""
     return width_factor * h_min
+
+
+def cell_width(msh, eps: float, floor: float) -> fem.Function:
+    """ε_K = max(ε, floor · h_K) per cell (DG0) [m], h_K the cell's longest edge.
+
+    Near φ = 1, φ = 1 + ψ, the conservative flux is γ(ε∇ψ + ψ n) with |n| = 1 however small ∇ψ
+    is: the sharpening part carries ψ down its own gradient (velocity −γn), so it compresses
+    every dip of φ below 1 like a small interface (near φ = 0, every bump above 0), at a rate
+    ~γ/h against the diffusion's γε/h². The scheme keeps φ bounded where ε is comparable to the
+    cell (Mirjalili, Ivey & Mani 2020, JCP 401, 109006: ε/Δx ≥ (γ/|u| + 1)/(2γ/|u|) for their
+    scheme), not in cells many times ε — the coarse cells of a mesh refined around the
+    interface, which the floor gives the width they can carry (docs/two-phase.md, sloshing)."""
+    V0 = fem.FunctionSpace(msh, ("DG", 0))
+    width = fem.Function(V0, name="interface_width")
+    h = cell_sizes(msh)
+    dofs = V0.dofmap.list.array.reshape(len(h), -1)[:, 0]
+    width.x.array[dofs] = np.maximum(eps, floor * h)
+    return width
 
 
 def logistic(d: np.ndarray, eps: float) -> np.ndarray:
@@ -149,7 +168,8 @@ class NodalNormal:
 
 def phase_field_residual(phi, w, phi_n, phi_k, normal, u, dt, gamma, eps, form: str, supg: bool, dx, ds,
                          advective=None):
-    """Residual F(φ; w) of the Crank–Nicolson scheme, linear in the trial φ.
+    """Residual F(φ; w) of the Crank–Nicolson scheme, linear in the trial φ; ``eps`` is ε [m], a
+    number or a per-cell field (:func:`cell_width`).
 
     The interface normal is the nodal (P1) normal of the extrapolated φ* = 3/2 φⁿ − 1/2 φⁿ⁻¹
     (second order, fixed during the step; see :class:`NodalNormal`); the remaining polynomial nonlinearity g(φ) = φ(1−φ)
@@ -262,8 +282,11 @@ class PhaseField:
         trial, w = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         #: 1 on cells where φ is transported in advective form (see phase_field_residual)
         self.advective_cells = fem.Function(fem.FunctionSpace(msh, ("DG", 0)), name="advective_cells")
+        #: ε per cell with ``width_floor`` (:func:`cell_width`), else None: ε everywhere
+        self.cell_width = None if cfg.width_floor is None else cell_width(msh, self.eps, cfg.width_floor)
+        eps_cells = self.eps if self.cell_width is None else self.cell_width
         F = phase_field_residual(trial, w, self.phi_n, self.phi_k, self.normal.n, self.u, self.dt, gamma,
-                                 self.eps, cfg.form, cfg.supg, dx, ds, self.advective_cells)
+                                 eps_cells, cfg.form, cfg.supg, dx, ds, self.advective_cells)
         self.a = fem.form(ufl.lhs(F))
         self.L = fem.form(ufl.rhs(F))
         self.mass_form = fem.form(self.phi * ufl.dx(metadata={"quadrature_degree": 2}))
