@@ -282,7 +282,8 @@ OVERTURN_FRICTION = (30.0, 20.0, 15.0)
 def block_overturn(level, out_dir: Path, comm) -> list[Metric]:
     """``cases/block_overturn.yaml`` at friction 30°, 20° and 15°: quick 160 × 48 cells
     (h = 12.6 mm, the block 4 cells long) to t = 1.0 s, full 400 × 120 (5 mm) to 1.2 s, in a
-    2.01 m channel whose end reflects the bore back to the block only after t_end.
+    2.01 m channel whose end reflects the bore back to the block only after t_end. The block
+    stands in the water of the bed with its buoyancy (the case's ``hidden_pressure``).
 
     The tracked point is the block's upstream top corner (the paper's Fig. 15–16 plot a point
     on the block). overturned = 1 when, at every friction, the block turned past 45° — past the
