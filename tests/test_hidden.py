@@ -20,9 +20,16 @@ from .test_coupled import series_on_one_and_two_ranks, sliding_pocket_case
 RHO, G = 998.2, 9.81
 
 
-def rotation_z(deg: float) -> np.ndarray:
+def rotation(axis, deg: float) -> np.ndarray:
+    """Rotation by ``deg`` about the unit vector ``axis`` (Rodrigues)."""
+    k = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     a = np.radians(deg)
-    return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+
+
+def rotation_z(deg: float) -> np.ndarray:
+    return rotation((0.0, 0.0, 1.0), deg)
 
 
 def test_perimeter_samples_close_round_a_rotated_box_and_a_circle():
@@ -77,14 +84,6 @@ def test_the_piezometric_interpolation_is_hydrostatic_round_corners():
     assert hidden.sum() > 50 and (~hidden).sum() > 50
     ph = hidden_pressure(hidden, p, np.full(len(p), RHO), gx, chain_conductance(ds))
     np.testing.assert_allclose(ph, p, rtol=0, atol=1e-9)
-
-
-def rotation(axis, deg: float) -> np.ndarray:
-    """Rotation by ``deg`` about the unit vector ``axis`` (Rodrigues)."""
-    k = np.asarray(axis, float) / np.linalg.norm(axis)
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    a = np.radians(deg)
-    return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
 
 
 @pytest.mark.parametrize("kind", [BOX, SPHERE, CYLINDER])

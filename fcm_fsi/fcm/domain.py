@@ -335,13 +335,11 @@ class CutDomain:
         :meth:`body_forces`; ``pressure`` and ``weight`` UFL expressions (forms compiled once per
         pair). Collective."""
         key = (id(pressure), id(weight))
-        cache = self.__dict__.setdefault("_pressure_forms", {})
-        if key not in cache:
-            # −w p n out of the structure = w p × the wall normal (out of the fluid); the refs
-            # kept with the forms keep id() unique
-            cache[key] = (self._cellwise_load_forms([(weight * pressure * self.wall_normal(), self.dGamma)]),
-                          (pressure, weight))
-        return self._assembled_loads(cache[key][0], nbodies, centres)
+        if getattr(self, "_pressure_key", None) != key:
+            # −w p n out of the structure = w p × the wall normal (out of the fluid)
+            self._pressure_forms = self._cellwise_load_forms([(weight * pressure * self.wall_normal(), self.dGamma)])
+            self._pressure_key, self._pressure_refs = key, (pressure, weight)   # the refs keep id() unique
+        return self._assembled_loads(self._pressure_forms, nbodies, centres)
 
     def _assembled_loads(self, forms, nbodies: int, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per-body force and torque of cell-wise (DG0) force and moment forms."""

@@ -195,6 +195,12 @@ def surface_samples(kind: int, half: np.ndarray, offset: np.ndarray, rot: np.nda
     raise ValueError(f"primitive kind {kind}: no surface that this module samples")
 
 
+def symmetric_graph(i: np.ndarray, j: np.ndarray, c: np.ndarray, n: int) -> sp.csr_matrix:
+    """The (n, n) conductance matrix with c on the links (i, j) and (j, i)."""
+    return sp.coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
+                         shape=(n, n)).tocsr()
+
+
 def chain_conductance(lengths: np.ndarray) -> sp.csr_matrix:
     """The closed chain of samples of one curve (cyclic order) with conductance
     1/(arc distance) between consecutive midpoints: its harmonic functions are linear in arc
@@ -203,8 +209,7 @@ def chain_conductance(lengths: np.ndarray) -> sp.csr_matrix:
     i = np.arange(n)
     j = (i + 1) % n
     c = 2.0 / (lengths[i] + lengths[j])
-    return sp.coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
-                         shape=(n, n)).tocsr()
+    return symmetric_graph(i, j, c, n)
 
 
 def radius_conductance(points: np.ndarray, spacing: float) -> sp.csr_matrix:
@@ -214,8 +219,7 @@ def radius_conductance(points: np.ndarray, spacing: float) -> sp.csr_matrix:
     i, j = pairs[:, 0], pairs[:, 1]
     c = 1.0 / np.sum((points[i] - points[j]) ** 2, axis=1)
     n = len(points)
-    return sp.coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
-                         shape=(n, n)).tocsr()
+    return symmetric_graph(i, j, c, n)
 
 
 def body_samples(shapes: Shapes, body: int, spacing: float,
@@ -311,20 +315,18 @@ def hidden_pressure(hidden: np.ndarray, p: np.ndarray, rho: np.ndarray, gx: np.n
 
 
 class HiddenSurface:
-    """The samples of the surface of every body of ``moving`` that has level-set primitives
-    (:func:`body_samples`) and the load of
-    :func:`hidden_pressure` on the hidden ones. ``level`` and ``pressure`` are P1 functions
-    on ``mesh``; 2D meshes sample each body's section z = 0."""
+    """The samples of the surface of every body that has level-set primitives (a body without
+    any, such as a foundation below the ground, is not in the fluid) (:func:`body_samples`) and
+    the load of :func:`hidden_pressure` on the hidden ones. ``share`` and ``pressure`` are P1
+    functions on ``mesh``; 2D meshes sample each body's section z = 0."""
 
-    def __init__(self, mesh, shapes: Shapes, nbodies: int, moving: np.ndarray, spacing: float) -> None:
+    def __init__(self, mesh, shapes: Shapes, nbodies: int, spacing: float) -> None:
         self.mesh, self.comm, self.nb = mesh, mesh.comm, int(nbodies)
-        self.dim = self.tdim = mesh.topology.dim
-        self.tree = geometry.BoundingBoxTree(mesh, self.tdim)
-        self.n_owned = mesh.topology.index_map(self.tdim).size_local
+        self.dim = mesh.topology.dim
+        self.tree = geometry.BoundingBoxTree(mesh, self.dim)
+        self.n_owned = mesh.topology.index_map(self.dim).size_local
         x, n, w, graphs, body = [], [], [], [], []
-        for b in np.flatnonzero(np.asarray(moving, bool)):
-            if not np.any(shapes.body == b):         # not in the fluid (a foundation below the ground)
-                continue
+        for b in np.unique(shapes.body[shapes.body >= 0]):
             xb, nb_, wb, cb = body_samples(shapes, int(b), spacing, self.dim)
             x.append(xb), n.append(nb_), w.append(wb), graphs.append(cb)
             body.append(np.full(len(wb), int(b)))
@@ -389,8 +391,7 @@ class HiddenSurface:
         other = self.body[i] != self.body[j]
         i, j = i[other], j[other]
         c = 1.0 / np.maximum(np.sum((xw[i] - xw[j]) ** 2, axis=1), 0.25 * self.spacing ** 2)
-        return sp.coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
-                             shape=(n, n)).tocsr()
+        return symmetric_graph(i, j, c, n)
 
     def load(self, share, pressure, density, gravity: np.ndarray, cut_owner: np.ndarray, solid: np.ndarray,
              pos: np.ndarray, rot: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:

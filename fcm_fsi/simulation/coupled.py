@@ -162,7 +162,7 @@ class CoupledModel:
             key = f"key 'coupling.hidden_pressure' = {cp.hidden_pressure}"
             try:
                 # every body, fixed ones too: the fill's share of Γ comes off all of them
-                self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb, np.ones(self.nb, bool),
+                self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb,
                                             self.h_min * HIDDEN_SPACING[self.gdim])
             except ValueError as err:
                 raise ConfigError(f"{key}: {err}") from None
