@@ -107,7 +107,8 @@ class FluidConfig:
         30, doc="Krylov iterations above which a kept preconditioner (preconditioner_steps > 1) is rebuilt "
                 "at the next solve", ge=1, le=10000)
     max_iterations: int = param(25, doc="nonlinear iterations per step before the run stops with an error", ge=1)
-    quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ)", ge=0, le=8)
+    quadrature_degree: int = param(0, doc="quadrature degree of the NS forms (0 = automatic: 2, or 3 with field ρ/μ); in coupled "
+                                   "runs the cells the structure cuts use the moment-fitted rule instead", ge=0, le=8)
     well_balanced: bool | None = param(
         None, doc="two-phase runs: carry the gradient part of ρ f as a P2 static pressure Π, p = p' + Π "
                   "(fluid/hydrostatic.py), so that a layered fluid at rest is an exact discrete solution; "

@@ -38,6 +38,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..fluid.solvers import DIRECT_LU, make_ksp, solve as solve_ksp
+from ..fluid.tagged_form import TaggedForm
 
 #: solver of the pressure-impulse Laplacian (a symmetric positive definite P1 system)
 POISSON_2D = dict(DIRECT_LU)
@@ -65,7 +66,7 @@ class PotentialAddedMass:
         self.gdim = gdim = mesh.geometry.dim
         S1 = cut.S1
         p, q = ufl.TrialFunction(S1), ufl.TestFunction(S1)
-        self._a = fem.form((1.0 / density) * ufl.inner(ufl.grad(p), ufl.grad(q)) * cut.dx)
+        self._a = TaggedForm((1.0 / density) * ufl.inner(ufl.grad(p), ufl.grad(q)) * cut.dx)
         fdim = mesh.topology.dim - 1
         mesh.topology.create_connectivity(fdim, fdim + 1)
         if open_facets is None:
@@ -82,7 +83,7 @@ class PotentialAddedMass:
             best = self.comm.allreduce((float(d.min()), self.comm.rank), op=MPI.MINLOC)
             dofs = np.array([int(np.argmin(d))], np.int32) if self.comm.rank == best[1] else np.zeros(0, np.int32)
         self._bc = fem.dirichletbc(PETSc.ScalarType(0.0), dofs, S1)
-        self._A = fem.petsc.create_matrix(self._a)
+        self._A = fem.petsc.create_matrix(self._a.form)
         self._ksp = make_ksp(self.comm, self._A, "added_mass_", POISSON_2D if gdim == 2 else POISSON_3D)
         # C_f: rows DG0 (cells), columns P1; f = n_j (j < gdim), then (x × n) (1 in 2D, 3 in 3D)
         D0 = fem.FunctionSpace(mesh, ("DG", 0))
@@ -94,8 +95,13 @@ class PotentialAddedMass:
         else:
             xn = ufl.cross(x, n)
             moments = [xn[k] for k in range(3)]
-        self._c_forms = [fem.form(f * p * v0 * cut.dGamma) for f in [n[j] for j in range(gdim)] + moments]
-        self._C = [fem.petsc.create_matrix(f) for f in self._c_forms]
+        self._c_forms = [TaggedForm(f * p * v0 * cut.dGamma) for f in [n[j] for j in range(gdim)] + moments]
+        # stored zeros on every cell: the cut cells move, and PETSc drops entries outside the
+        # structure of the first assembly
+        zero = fem.form(fem.Constant(mesh, PETSc.ScalarType(0.0)) * p * v0 * cut.dx_q)
+        self._C = [fem.petsc.assemble_matrix(zero) for _ in self._c_forms]
+        for C in self._C:
+            C.assemble()
         self.chi = fem.Function(D0)
         self._dg0_dofs = D0.dofmap.list.array           # cell → DG0 dof (owned cells first)
         self._b = [fem.petsc.create_vector(fem.form(q * cut.dx)) for _ in range(rigid_modes(gdim))]
@@ -106,12 +112,12 @@ class PotentialAddedMass:
     def assemble(self) -> None:
         """Laplacian and the C_f of the current cut and density (call once per fluid step)."""
         self._A.zeroEntries()
-        fem.petsc.assemble_matrix(self._A, self._a, bcs=[self._bc])
+        fem.petsc.assemble_matrix(self._A, self._a.form, bcs=[self._bc])
         self._A.assemble()
         self._ksp.setOperators(self._A)
         for C, form in zip(self._C, self._c_forms):
             C.zeroEntries()
-            fem.petsc.assemble_matrix(C, form)
+            fem.petsc.assemble_matrix(C, form.form)
             C.assemble()
 
     def tensors(self, weights: np.ndarray, centres: np.ndarray) -> np.ndarray:

@@ -8,7 +8,11 @@ cut cell only, by moment-fitted weights at the points of the standard rule
     ∫_{Ω_f} f dx  = Σ_K Σ_q ŵ_q |J_K| c_q f(x_q)        (``CutDomain.dx``: f · c_v · dx_q)
     ∫_Γ f dΓ      = Σ_K Σ_q ŵ_q |J_K| d_q f(x_q)        (``surface`` weights d_q)
 
-both exact for polynomials of degree ≤ 2 over the piecewise-planar cut geometry.
+both exact for polynomials of degree ≤ 2 over the piecewise-planar cut geometry. Only cut
+cells need the weights: the cells are tagged (``cell_tags``: uncut fluid, cut, solid) and the
+uncut ones are integrated with the plain rule of degree ``plain_degree`` and no weight fields,
+solid cells with the plain rule times α. The tags change in place with the cut; forms compiled
+as :class:`~fcm_fsi.fluid.tagged_form.TaggedForm` follow them.
 
 Cells inside bodies and vertices with tiny fluid support: the solid part of every cell
 carries the fluid equations scaled by α ≪ 1 (a fictitious domain, as in the finite cell
@@ -47,12 +51,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import basix
+import dolfinx.mesh
 import numpy as np
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
 from ..fluid.navier_stokes import cell_size, momentum_residual
+from ..fluid.tagged_form import TaggedForm
 from .moments import fitted_weights
 
 #: wall conditions on Γ (module docstring): the paper's penalty; penalty + the pressure part of
@@ -64,11 +70,22 @@ WALL_TERMS = ("penalty", "pressure", "nitsche")
 #: least as many points as monomials of degree ≤ 2 (2D: 7 points ≥ 6; 3D: 14 points ≥ 10)
 CUT_QUADRATURE_DEGREE = {2: 5, 3: 4}
 
+#: cell classes of the cut (``CutDomain.cell_tags`` values): every vertex in the fluid, cut by Γ,
+#: every vertex in a body
+FLUID_CELL, CUT_CELL, SOLID_CELL = 0, 1, 2
 
 
 def cut_cells(values: np.ndarray) -> np.ndarray:
     """Cells (rows of vertex level-set values) that Γ cuts: some vertex in the body, some not."""
     return (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
+
+
+def cell_classes(values: np.ndarray) -> np.ndarray:
+    """FLUID_CELL, CUT_CELL or SOLID_CELL per row of vertex level-set values (fluid where ≥ 0)."""
+    classes = np.full(len(values), CUT_CELL, np.int32)
+    classes[values.min(axis=1) >= 0] = FLUID_CELL
+    classes[values.max(axis=1) < 0] = SOLID_CELL
+    return classes
 
 
 class WeightedMeasure:
@@ -79,6 +96,19 @@ class WeightedMeasure:
 
     def __rmul__(self, integrand):
         return (integrand * self.weight) * self.dx
+
+
+class FluidMeasure:
+    """``f * FluidMeasure`` = ∫ f over the fluid with the fictitious α inside bodies: the plain
+    rule on uncut fluid cells, α × the plain rule on solid cells, the fitted volume weights
+    (c_v(1 − α) + α at the points) on cut cells."""
+
+    def __init__(self, plain: ufl.Measure, fitted: ufl.Measure, weight, alpha: float) -> None:
+        self.plain, self.fitted, self.weight, self.alpha = plain, fitted, weight, alpha
+
+    def __rmul__(self, integrand):
+        return (integrand * self.plain(FLUID_CELL) + (self.alpha * integrand) * self.plain(SOLID_CELL)
+                + (integrand * self.weight) * self.fitted(CUT_CELL))
 
 
 @dataclass
@@ -97,11 +127,15 @@ class CutDomain:
 
     mesh: dolfinx mesh (P1 simplices); alpha: fictitious-domain factor of the solid part;
     penalty: γ of the penalty scaling (module docstring); extension: β of the cut-cell
-    extension (module docstring), 0 = off.
+    extension (module docstring), 0 = off; plain_degree: quadrature degree on uncut cells
+    (default the cut rule's degree).
+
+    Forms over :attr:`dx`, :attr:`dGamma` and :attr:`dExt` depend on :attr:`cell_tags`;
+    compile them as :class:`~fcm_fsi.fluid.tagged_form.TaggedForm` so they follow the cut.
     """
 
     def __init__(self, mesh, alpha: float = 1e-3, penalty: float = 100.0, wall: str = "pressure",
-                 extension: float = 0.0, slip: bool = False) -> None:
+                 extension: float = 0.0, slip: bool = False, plain_degree: int | None = None) -> None:
         if wall not in WALL_TERMS:
             raise ValueError(f"wall = {wall!r}; allowed: {', '.join(WALL_TERMS)}")
         self.mesh, self.comm, self.wall = mesh, mesh.comm, wall
@@ -121,13 +155,21 @@ class CutDomain:
         self.surface_weight = fem.Function(self.Vq, name="surface_weight")
         self.extension_weight = fem.Function(self.Vq, name="extension_weight")
         self.extension = float(extension)
-        self.dx_q = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": self.degree})
-        self.dx = WeightedMeasure(self.dx_q, self.volume_weight)
-        self.dGamma = WeightedMeasure(self.dx_q, self.surface_weight)
-        self.dExt = WeightedMeasure(self.dx_q, self.extension_weight)   # solid part of cut cells
-
         imap = mesh.topology.index_map(tdim)
         self.n_owned = imap.size_local
+        # every owned cell tagged; until the first update all count as cut (weights everywhere)
+        self.cell_tags = dolfinx.mesh.meshtags(mesh, tdim, np.arange(self.n_owned, dtype=np.int32),
+                                               np.full(self.n_owned, CUT_CELL, np.int32))
+        self.plain_degree = self.degree if plain_degree is None else int(plain_degree)
+        self.dx_q = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": self.degree})
+        fitted = ufl.Measure("dx", domain=mesh, subdomain_data=self.cell_tags,
+                             metadata={"quadrature_degree": self.degree})
+        plain = ufl.Measure("dx", domain=mesh, subdomain_data=self.cell_tags,
+                            metadata={"quadrature_degree": self.plain_degree})
+        self.dx = FluidMeasure(plain, fitted, self.volume_weight, self.alpha)
+        self.dGamma = WeightedMeasure(fitted(CUT_CELL), self.surface_weight)
+        self.dExt = WeightedMeasure(fitted(CUT_CELL), self.extension_weight)   # solid part of cut cells
+
         ncells = imap.size_local + imap.num_ghosts
         nv = tdim + 1
         self.geom_cells = mesh.geometry.dofmap.array.reshape(ncells, -1)[:, :nv]
@@ -183,6 +225,7 @@ class CutDomain:
         self.volume_weight.x.array[self.q_dofs] = (1 - a) * cv + a
         self.surface_weight.x.array[self.q_dofs] = cs
         self.extension_weight.x.array[self.q_dofs] = np.where(cut_cells(values)[:, None], 1.0 - cv, 0.0)
+        self.cell_tags.values[:] = cell_classes(values[: self.n_owned])
         self.level_set.x.array[self.level_dofs] = level
         self.set_wall_velocity(wall_velocity)
         # a cell belongs to the body owning its deepest vertex
@@ -312,13 +355,13 @@ class CutDomain:
         x = ufl.SpatialCoordinate(self.mesh)
         V0 = fem.VectorFunctionSpace(self.mesh, ("DG", 0))
         v0 = ufl.TestFunction(V0)
-        force = fem.form(sum(ufl.inner(f, v0) * m for f, m in loads))
+        force = TaggedForm(sum(ufl.inner(f, v0) * m for f, m in loads))
         if self.gdim == 2:
             S0 = fem.FunctionSpace(self.mesh, ("DG", 0))
-            moment = fem.form(sum((x[0] * f[1] - x[1] * f[0]) * ufl.TestFunction(S0) * m for f, m in loads))
+            moment = TaggedForm(sum((x[0] * f[1] - x[1] * f[0]) * ufl.TestFunction(S0) * m for f, m in loads))
             dofs_m = S0.dofmap.list.array
         else:
-            moment = fem.form(sum(ufl.inner(ufl.cross(x, f), v0) * m for f, m in loads))
+            moment = TaggedForm(sum(ufl.inner(ufl.cross(x, f), v0) * m for f, m in loads))
             dofs_m = V0.dofmap.list.array
         return force, moment, V0.dofmap.list.array, dofs_m
 
@@ -345,8 +388,8 @@ class CutDomain:
         """Per-body force and torque of cell-wise (DG0) force and moment forms."""
         fF, fM, dofs_f, dofs_m = forms
         own = self.n_owned
-        vf = fem.petsc.assemble_vector(fF)      # no ghost accumulation: DG0 dofs are cell-local
-        vm = fem.petsc.assemble_vector(fM)
+        vf = fem.petsc.assemble_vector(fF.form)      # no ghost accumulation: DG0 dofs are cell-local
+        vm = fem.petsc.assemble_vector(fM.form)
         nm = 1 if self.gdim == 2 else 3
         force = self._to_bodies(vf.array.reshape(-1, self.gdim)[dofs_f[:own]], nbodies)
         moment = self._to_bodies(vm.array.reshape(-1, nm)[dofs_m[:own]], nbodies)
@@ -386,14 +429,14 @@ class CutDomain:
         if getattr(self, "_wetted_value", None) is not value:
             S0 = fem.FunctionSpace(self.mesh, ("DG", 0))
             v0 = ufl.TestFunction(S0)
-            self._wetted_forms = (fem.form(value * v0 * self.dGamma), fem.form(v0 * self.dGamma),
+            self._wetted_forms = (TaggedForm(value * v0 * self.dGamma), TaggedForm(v0 * self.dGamma),
                                   S0.dofmap.list.array)
             self._wetted_value = value
         f_val, f_area, dofs = self._wetted_forms
         own = self.n_owned
         sums = np.zeros((2, nbodies))
         for k, form in enumerate((f_val, f_area)):
-            vec = fem.petsc.assemble_vector(form)
+            vec = fem.petsc.assemble_vector(form.form)
             sums[k] = self._to_bodies(vec.array[dofs[:own]], nbodies)
             vec.destroy()
         sums = self.comm.allreduce(sums, op=MPI.SUM)

@@ -29,6 +29,7 @@ from ..config.fluid import FluidConfig
 from ..io.logging import get_logger
 from . import solvers
 from .boundary import build_bcs
+from .tagged_form import TaggedForm
 
 log = get_logger("fluid")
 
@@ -274,9 +275,9 @@ class NavierStokes:
             # on a cut mesh the projection runs over the fluid part only (the weights change
             # with the cut, so the lumped mass is re-assembled at every update)
             dxp = self.dx if dx is not None else ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": 1})
-            self._strain_mass_form = fem.form(ufl.inner(ufl.as_matrix([[1.0] * gdim] * gdim), psi) * dxp)
+            self._strain_mass_form = TaggedForm(ufl.inner(ufl.as_matrix([[1.0] * gdim] * gdim), psi) * dxp)
             self._strain_mass_fixed = dx is None
-            self._strain_lumped = fem.petsc.assemble_vector(self._strain_mass_form)
+            self._strain_lumped = fem.petsc.assemble_vector(self._strain_mass_form.form)
             self._strain_lumped.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
             self._strain_rhs_vec = self._strain_lumped.duplicate()
             self._strain_pending = psi
@@ -284,11 +285,12 @@ class NavierStokes:
         if self.strain is not None:
             u_n, _ = ufl.split(self.U_n)
             u_extrap = (1 + self.theta) * u_n - self.theta * self.u_nm1
-            self._strain_rhs = fem.form(ufl.inner(epsilon(u_extrap), self._strain_pending) * dxp)
+            self._strain_rhs = TaggedForm(ufl.inner(epsilon(u_extrap), self._strain_pending) * dxp)
         self.residual_ufl = self._residual(extra_terms)
         dU = ufl.TrialFunction(self.W)
-        self.F_form = fem.form(self.residual_ufl)
-        self.J_form = fem.form(ufl.derivative(self.residual_ufl, self.U, dU))
+        # compiled once; a cut measure's cell tags may change between steps (TaggedForm)
+        self._F = TaggedForm(self.residual_ufl)
+        self._J = TaggedForm(ufl.derivative(self.residual_ufl, self.U, dU))
         self._tau_exprs = self._tau_interpolation()
 
         self.bc_set = build_bcs(self, config.boundaries, velocity_functions)
@@ -326,6 +328,16 @@ class NavierStokes:
         return sets
 
     # ------------------------------------------------------------------ forms
+    @property
+    def F_form(self) -> fem.FormMetaClass:
+        """The residual form (current for the cut's cell tags)."""
+        return self._F.form
+
+    @property
+    def J_form(self) -> fem.FormMetaClass:
+        """The Jacobian form (current for the cut's cell tags)."""
+        return self._J.form
+
     def _parts(self) -> FormParts:
         u, p = ufl.split(self.U)
         if self.static_pressure is not None:
@@ -418,12 +430,12 @@ class NavierStokes:
         if not self._strain_mass_fixed:
             with self._strain_lumped.localForm() as loc:
                 loc.set(0.0)
-            fem.petsc.assemble_vector(self._strain_lumped, self._strain_mass_form)
+            fem.petsc.assemble_vector(self._strain_lumped, self._strain_mass_form.form)
             self._strain_lumped.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         b = self._strain_rhs_vec
         with b.localForm() as loc:
             loc.set(0.0)
-        fem.petsc.assemble_vector(b, self._strain_rhs)
+        fem.petsc.assemble_vector(b, self._strain_rhs.form)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         b.pointwiseDivide(b, self._strain_lumped)
         b.copy(self.strain.vector)

@@ -59,6 +59,7 @@ from ..fcm.hidden import NOT_CUT, HiddenSurface
 from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
 from ..fcm.pockets import PocketVents
 from ..fluid.solvers import LinearSolveError
+from ..fluid.tagged_form import TaggedForm
 from ..io.logging import get_logger
 from ..io.timing import StageTimer
 from ..mesh.build import build_mesh, cell_sizes
@@ -97,8 +98,10 @@ class CoupledModel:
             block_faces = FaceDistance(shapes, st.pos, st.quat)
         self.mesh = build_mesh(case.mesh, comm, case_dir, face_distance=block_faces)
         self.gdim = self.mesh.geometry.dim
+        # uncut cells: the Navier–Stokes forms' own rule (exact for their polynomial parts)
+        plain_degree = case.fluid.quadrature_degree or (3 if case.phase_field is not None else 2)
         self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, wall=cp.wall,
-                             extension=cp.cut_extension, slip=cp.wall_slip)
+                             extension=cp.cut_extension, slip=cp.wall_slip, plain_degree=plain_degree)
         ns_options = {"dx": self.cut.dx, "extra_terms": [self.cut.penalty_term()]}
         fluid_case = dataclasses.replace(case, fluid=dataclasses.replace(case.fluid, quadrature_degree=self.cut.degree))
         if case.phase_field is not None:
@@ -685,9 +688,9 @@ class CoupledModel:
         its fictitious part, nor the reverse."""
         if not hasattr(self, "_rho_forms"):
             v0 = ufl.TestFunction(rho_cell.function_space)
-            self._rho_forms = (fem.form(rho * v0 * self.cut.dx), fem.form(v0 * self.cut.dx))
-        num = fem.petsc.assemble_vector(self._rho_forms[0])
-        den = fem.petsc.assemble_vector(self._rho_forms[1])
+            self._rho_forms = (TaggedForm(rho * v0 * self.cut.dx), TaggedForm(v0 * self.cut.dx))
+        num = fem.petsc.assemble_vector(self._rho_forms[0].form)
+        den = fem.petsc.assemble_vector(self._rho_forms[1].form)
         # the fitted weights may be negative at some points: keep the mean within the phases'
         # densities (it sets the wall penalty p̄ and the PSPG scaling, which must stay positive)
         fl = self.case.fluid
@@ -714,8 +717,8 @@ class CoupledModel:
         assembled wall residual summed over the velocity dofs of each component (N)."""
         if self._wall_form is None:
             term = self.cut.penalty_term()(self.ns.parts)
-            self._wall_form = fem.form(term)
-        vec = fem.petsc.assemble_vector(self._wall_form)
+            self._wall_form = TaggedForm(term)
+        vec = fem.petsc.assemble_vector(self._wall_form.form)
         vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         owned = self.ns.V.dofmap.index_map.size_local
         w_dofs = np.asarray(self.ns.V_map).reshape(-1, self.gdim)[:owned]
