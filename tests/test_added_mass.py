@@ -189,8 +189,8 @@ def test_coupled_fluid_force_converges_to_the_potential_added_mass(tmp_path):
     tank. Over t = 0.01–0.024 s (drag negligible, displacement < R/2) the fluid force is
     F = ρgV − m_a a, so m_a = (ρgV − F)/a from bodies.csv. The reference is the potential-flow
     m_a of this geometry (``PotentialAddedMass``, verified against closed forms above, at
-    R/h = 25.6: 1.044 ρV vertically — the floor below raises it above ρV). Measured in session
-    18 at R/h = 3.2, 6.4, 12.8, 25.6: 2.40, 1.66, 1.35, 1.18 ρV — the excess over the potential
+    R/h = 25.6: 1.044 ρV vertically — the floor below raises it above ρV). Measured
+    at R/h = 3.2, 6.4, 12.8, 25.6: 2.40, 1.66, 1.35, 1.18 ρV — the excess over the potential
     value halves with h (a fluid layer about 0.7 cells thick entrained by the cut wall), so the
     coupled solve is first-order convergent to the right added mass. Checked here at R/h =
     6.4 and 12.8: the excess ratio between the meshes is that of first order (1.6–2.6) and

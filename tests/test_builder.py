@@ -222,7 +222,7 @@ def test_shipped_buildings_start_standing_on_the_ground(name):
     """The structure's spheres are inset by one radius (their envelope is the box), so a
     building whose ``origin`` is on the ground plane starts touching it. The tsunami case had
     its origin one radius up (z = 0.1 m): the 72 t building fell 0.1 m at t = 0, hit the ground
-    at 1.4 m/s and bounced until ≈ 0.6 s, just before the water arrived (session 19)."""
+    at 1.4 m/s and bounced until ≈ 0.6 s, just before the water arrived."""
     from fcm_fsi.config.case import load_case
     from fcm_fsi.dem.model import build_state, build_structure
     dem = load_case(ROOT / "cases" / f"{name}.yaml").dem

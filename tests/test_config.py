@@ -144,7 +144,7 @@ def test_resolution_levels_merge_and_name_the_allowed_levels():
 def test_command_line_overrides_win_over_the_resolution_level():
     """Precedence case file < resolution level < --set: the coarse tsunami level sets dem.dt
     and fluid.petsc, and a --set of either must not be silently replaced by the level's value
-    (it was until session 20); --set can still pick and edit the level itself."""
+    (a regression once seen); --set can still pick and edit the level itself."""
     path = ROOT / "cases" / "tsunami_building.yaml"
     coarse = load_case(path)
     assert coarse.dem.dt == 5.0e-5 and coarse.fluid.petsc["pc_factor_mat_solver_type"] == "mumps"

@@ -127,7 +127,7 @@ def test_failed_step_is_retaken_as_two_half_steps():
 def test_implicit_coupling_iterates_on_the_wall_velocity_the_fluid_gets():
     """With ``coupling.iterations`` > 1 the fixed-point unknown is the rigid motion the wall
     nodes get (here ``wall_velocity: mean``: the sub-steps' mean), so the first pass gives the
-    fluid what the explicit step would; until session 26 it was the end-of-step v, ω."""
+    fluid what the explicit step would (not the end-of-step v, ω)."""
     from mpi4py import MPI
 
     from fcm_fsi.io.timing import StageTimer
@@ -386,7 +386,7 @@ def sliding_pocket_case(speed: float, drain: bool) -> dict:
 
 
 def test_a_drained_pocket_keeps_the_sliding_block_s_lift(tmp_path):
-    """coupling.drain_pockets (docs/coupling.md, session 28): the block of block_overturn lying
+    """coupling.drain_pockets (docs/coupling.md): the block of block_overturn lying
     on the stopper and the floor slides at 5 cm/s; the water under it stays sealed. Around a
     10 cm deep block in a wider channel that water would pass the block's sides and keep the
     surrounding pressure: the fluid's vertical load would change by O(ρU²·area) ≈ 0.03 N from

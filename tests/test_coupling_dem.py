@@ -122,7 +122,7 @@ def test_advance_refuses_a_wrong_load_shape_and_mode():
 def test_a_diverging_load_stops_the_sub_steps_instead_of_crashing_the_neighbour_search(one_numba_thread):
     """A non-finite load makes the state non-finite in one DEM step; the sub-steps stop there
     (the coupled model's check then names the block) instead of the next step's neighbour
-    search failing on a NaN grid (the traceback seen in session 16)."""
+    search failing on a NaN grid with a traceback."""
     sub = DEMSubcycler(build_system(dem_config([free_sphere(), free_sphere(position=[0.05, 0.0, 0.0])])))
     force = np.zeros((2, 3))
     force[0, 0] = np.inf
@@ -398,7 +398,7 @@ def test_a_coupled_run_whose_kinetic_energy_exceeds_what_the_system_has_stops(on
     g × mass × height; no inflow) is a divergence with a message; below it, or without a bound
     (inflow boundaries), the fluid's own verdict stands. The bonded wall with added_mass 2 ×
     the potential estimate ran on for 0.07 s at 100–250 m/s with φ in range before this
-    check (docs/coupling.md, session 17)."""
+    check (docs/coupling.md)."""
     from types import SimpleNamespace
 
     from fcm_fsi.simulation.coupled import CoupledModel

@@ -157,8 +157,8 @@ def test_coupled_run_on_a_band_mesh_and_on_its_file(tmp_path):
     """impact_box_3d with a 0.2 m band at its fixed box (0.5 m elsewhere) runs on 2 ranks and
     its log reports the band's smallest cells. The same mesh written by `python -m
     fcm_fsi.mesh --write` and read back as `mesh.kind: gmsh_file` (the cluster route for the
-    paper level) gives the same first step. Until session 33 every gmsh_file run failed
-    inside dolfinx 0.5.2's read_from_msh."""
+    paper level) gives the same first step (dolfinx 0.5.2's read_from_msh once failed on
+    every gmsh_file run)."""
     band = ["--set", "mesh.structure_band={size: 0.2, grading: 0.5}"]
     common = ["--set", "run.t_end=0.02", "--set", "output.xdmf=false"]
     res = run_cli(["cases/impact_box_3d.yaml", "--output", str(tmp_path / "band"), *band, *common], np_=2)

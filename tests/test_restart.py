@@ -137,12 +137,12 @@ def test_fingerprint_ignores_the_solver_choice_but_not_the_physics(root):
     solver = ['fluid.petsc={"ksp_type": "gmres", "pc_type": "lu"}', "fluid.reuse_preconditioner=true",
               'phase_field.petsc={"ksp_type": "preonly", "pc_type": "lu"}', "run.t_end=9.0"]
     assert case_fingerprint(load_case(path, solver)) == base
-    # the gas's Courant bound may be loosened on restart (session 21); the liquid's may not
+    # the gas's Courant bound may be loosened on restart; the liquid's may not
     assert case_fingerprint(load_case(path, ["run.cfl_gas=1.5"])) == base
     assert case_fingerprint(load_case(path, ["run.cfl=0.3"])) != base
     assert case_fingerprint(load_case(path, ["fluid.density=1000.5"])) != base
     assert case_fingerprint(load_case(path, ["fluid.rtol=1e-6"])) != base
-    # so may the update between the coupling's passes (session 31); the coupling's physics may not
+    # so may the update between the coupling's passes; the coupling's physics may not
     tsunami = root / "cases" / "tsunami_building.yaml"
     base_t = case_fingerprint(load_case(tsunami))
     assert case_fingerprint(load_case(tsunami, ["coupling.iteration_method=aitken"])) == base_t
@@ -165,8 +165,8 @@ def test_a_checkpoint_is_accepted_under_any_of_the_given_fingerprints(tmp_path):
 
 
 def test_the_replaced_checkpoint_is_kept_one_interval_back(tmp_path):
-    """Session 21: a block kicked by one bad step could not be continued from before the kick,
-    because the only checkpoint was written after it. The replaced file is now kept."""
+    """A block kicked by one bad step must be continuable from before the kick, which the
+    newest checkpoint, written after it, cannot do: the replaced file is kept."""
     from mpi4py import MPI
 
     from fcm_fsi.io.checkpoint import previous_checkpoint, read_checkpoint, write_checkpoint
@@ -216,7 +216,7 @@ def test_checkpoints_of_code_before_an_option_existed_are_accepted_only_at_its_o
     from fcm_fsi.config.case import load_case
     from fcm_fsi.io.checkpoint import ADDED_OPTIONS, accepted_fingerprints, case_fingerprint
     path = root / "cases" / "block_overturn.yaml"
-    old_mass = ["coupling.added_mass_model=volume"]   # the case itself uses the flow's since session 24
+    old_mass = ["coupling.added_mass_model=volume"]   # the case itself uses the flow's
     owner = load_case(path, old_mass)
     keys = [(sec, key) for sec, key, _ in ADDED_OPTIONS]
     assert keys[:2] == [("coupling", "load_split"), ("coupling", "wall_motion")]
@@ -244,7 +244,7 @@ def test_checkpoints_of_code_before_an_option_existed_are_accepted_only_at_its_o
 
 
 def test_a_checkpoint_from_before_blocks_could_be_bonded_is_accepted_while_none_is(root):
-    """``dem.blocks[].bonded`` (session 16) sits in every block: a checkpoint hashed without it
+    """``dem.blocks[].bonded`` sits in every block: a checkpoint hashed without it
     is accepted while no block is bonded (block_overturn), and refused once one is
     (bonded_wall_surge)."""
     from fcm_fsi.config.case import load_case
@@ -260,7 +260,7 @@ def test_a_checkpoint_from_before_blocks_could_be_bonded_is_accepted_while_none_
 
 
 def test_a_checkpoint_from_before_foundations_is_accepted_only_for_a_loose_building(root):
-    """``dem.structure.foundation`` (session 19): a tsunami checkpoint hashed without it is
+    """``dem.structure.foundation``: a tsunami checkpoint hashed without it is
     accepted while the building has none, and refused once it stands on one."""
     from fcm_fsi.config.case import load_case
     from fcm_fsi.io.checkpoint import ADDED_OPTIONS, accepted_fingerprints, case_fingerprint
@@ -276,7 +276,7 @@ def test_a_checkpoint_from_before_foundations_is_accepted_only_for_a_loose_build
 
 
 def test_a_checkpoint_from_before_the_mass_defect_term_is_refused_once_the_term_is_on(root):
-    """``fluid.mass_consistent_convection`` (session 20) changes the momentum equation: a
+    """``fluid.mass_consistent_convection`` changes the momentum equation: a
     checkpoint hashed without it is accepted only while the case keeps it off."""
     from fcm_fsi.config.case import load_case
     from fcm_fsi.io.checkpoint import ADDED_OPTIONS, accepted_fingerprints, case_fingerprint

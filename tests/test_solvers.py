@@ -51,8 +51,8 @@ def left_with(prefix: str) -> list[str]:
 
 def test_set_up_time_options_reach_the_preconditioner_and_leave_the_table():
     """mat_mumps_icntl_14 (read when MUMPS factorises) and bjacobi's sub_pc_type (read when the
-    blocks are made) were removed before the first solve until session 33, so a case file's
-    value was silently replaced by the default (20, ilu)."""
+    blocks are made) must still be in PETSc's table at the first solve: removed earlier, a case
+    file's value was silently replaced by the default (20, ilu)."""
     A = tridiagonal()
     ksp = make_ksp(MPI.COMM_WORLD, A, "t_mumps_", {"ksp_type": "gmres", "pc_type": "lu",
                                                    "pc_factor_mat_solver_type": "mumps", "mat_mumps_icntl_14": 77})

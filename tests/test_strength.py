@@ -67,7 +67,7 @@ def test_identified_sigma_c_gives_the_target_strength():
 
 def test_cli_reports_the_identification_and_refuses_a_case_without_bonds(capsys):
     assert main(["cases/tsunami_building.yaml", "--fck", "30"]) == 0
-    out = capsys.readouterr().out              # the case carries the identified σ_c (session 31)
+    out = capsys.readouterr().out              # the case carries the identified σ_c
     assert "identified sigma_c = 2.112e+06 Pa" in out and "1.00 x stronger" in out
     assert main(["cases/tsunami_building.yaml", "--flexural-strength", "3.625"]) == 0
     assert "1.00 x stronger" in capsys.readouterr().out

@@ -2,7 +2,7 @@
 
 The verification's quick level (1.5 s, ≈ 10 min on 2 ranks) and full level (10 s) are run by
 ``python -m fcm_fsi.verify tsunami_building``; this is the CI slice of the same case file: the
-`coarse` mesh, the founded 208-block building and the session-19 coupling settings, 0.06 s —
+`coarse` mesh, the founded 208-block building and the case's coupling settings, 0.06 s —
 before the water arrives, so the building must stand still on its foundation.
 """
 from __future__ import annotations
@@ -31,7 +31,7 @@ def test_tsunami_case_starts_with_the_building_at_rest_on_two_ranks(tmp_path):
     assert nb == 209                                                    # 208 blocks + the foundation
     z = bodies["z"].reshape(-1, nb)
     sink = np.abs(z - z[0]).max()
-    # a building that started above the ground (origin z 0.1 m until session 19) falls at g t:
+    # a building that started above the ground (origin z 0.1 m) falls at g t:
     # 17.7 mm by 0.06 s; standing on its foundation it only settles into its contacts and bonds
     # (1.2 mm measured; they ring at up to 0.1 m/s over a period 2π√(m/k) ≈ 40 ms)
     assert sink < 5e-3

@@ -44,7 +44,7 @@ def test_gas_courant_number_loosens_the_step_only_in_the_gas():
     """run.cfl_gas: Δt = min(C·h/max_liquid|u|, C_gas·h/max_gas|u|), φ read at the velocity
     nodes (checked against the dof coordinates). With 1 m/s in the liquid and 10 m/s in the gas
     the gas limits (1.2·h/10); with 2 m/s in the gas the liquid does (0.4·h/1); without
-    cfl_gas the gas's 10 m/s sets 0.4·h/10, the rule of every run before session 21."""
+    cfl_gas the gas's 10 m/s sets 0.4·h/10 (one Courant number for both phases)."""
     comm = MPI.COMM_WORLD
     data = still_water_case(cells=12, dt=1e-3, t_end=1e-2)
     data["run"]["cfl"], data["run"]["cfl_gas"] = 0.4, 1.2

@@ -27,23 +27,23 @@ class CouplingConfig:
     wall_slip: bool = param(
         False, doc="the wall penalty (and the cut-cell extension) act on the normal velocity only: a slip wall "
                    "without shear, for meshes far coarser than the boundary layer, where a no-slip wall's discrete "
-                   "reaction is a spurious shear of order ρ h |u|/Δt (docs/tsunami-history.md); false = no-slip")
+                   "reaction is a spurious shear of order ρ h |u|/Δt (docs/design-notes.md); false = no-slip")
     wall_velocity: Literal["end", "mean"] = param(
         "end", doc="block velocity the fluid's wall condition gets for the next step: end = v, ω at the end of the "
                    "DEM sub-steps; mean = their mean over the sub-steps (the displacement / Δt_f), which does not "
-                   "alias vibrations of bonded blocks far faster than the fluid step into the fluid (docs/tsunami-history.md)")
+                   "alias vibrations of bonded blocks far faster than the fluid step into the fluid (docs/design-notes.md)")
     load_split: Literal["owner", "shared"] = param(
         "owner", doc="which block a cut cell's load (and a node's wall velocity) belongs to: owner = the block its "
                      "deepest vertex is deepest in; shared = where a second block's shape is within one cell (the "
                      "smallest, h) of as deep, the two share it, the second's weight ½ − (d₂ − d₁)/(2h) ≥ 0 — continuous where "
                      "widened shapes overlap and blocks turn, where owner jumps between bonded neighbours every "
-                     "step (docs/tsunami-history.md, session 14)")
+                     "step (docs/design-notes.md)")
     wall_motion: Literal["block", "bonded_cluster"] = param(
         "block", doc="whose rigid motion the fluid's wall velocity ū follows: block = each block's own v, ω; "
                      "bonded_cluster = the rigid motion (momentum and angular momentum kept) of the cluster of blocks "
                      "still joined by intact bonds, so the bonds' vibration (µm, faster than the fluid step) is not "
                      "fed into the wall condition, where neighbours' differing ū made the penalty push them apart "
-                     "(docs/tsunami-history.md, session 15); a block whose bonds have all broken follows its own motion; a "
+                     "(docs/design-notes.md); a block whose bonds have all broken follows its own motion; a "
                      "cluster holding a fixed block is at rest")
     cut_extension: float = param(
         1.0, doc="β of the cut-cell extension: the solid part of every cut cell carries a Brinkman term "
@@ -69,8 +69,8 @@ class CouplingConfig:
                                            "touches — their water leaves and enters as past the sides of a block of "
                                            "finite depth in 3D. For 2D runs of blocks narrower than the channel, "
                                            "where a vent's sub-cell slit otherwise sets the pocket's pressure "
-                                           "(block_overturn: +650 Pa under the sliding block, docs/coupling.md, "
-                                           "session 28). The pocket's water volume is then not conserved in the "
+                                           "(block_overturn: +650 Pa under the sliding block, docs/coupling.md). "
+                                           "The pocket's water volume is then not conserved in the "
                                            "plane. With vent_pockets false the fill keeps hiding the underside "
                                            "near the contacts (the lying block at rest: 0.44 N of lift instead of 3.6 N)")
     hidden_pressure: Literal["none", "linear", "hydrostatic"] = param(
@@ -129,7 +129,7 @@ class CouplingConfig:
                       "tensor = the same solves, but the translational tensor itself is the DEM's added inertia "
                       "(m I + M̃, each direction its own added mass; rotations as potential): the largest eigenvalue "
                       "over-corrects the directions where the fluid answers less, and the lagged excess returns a "
-                      "landing as a bounce (docs/coupling.md, session 25)")
+                      "landing as a bounce (docs/design-notes.md)")
     depth: float | None = param(None, unit="m", doc="2D fluid only: out-of-plane extent of the blocks; the "
                                                    "per-unit-depth fluid force is multiplied by it", gt=0)
     band: float | None = param(None, unit="m", doc="level-set band half-width (default 2 × the largest cell)", gt=0)

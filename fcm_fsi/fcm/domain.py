@@ -312,7 +312,7 @@ class CutDomain:
         its discrete reaction is the momentum of the near-wall cells stopped every step, a
         shear of order ρ h |u|/Δt (≈ 8e5 Pa at h = 0.8 m, 10 m/s, Δt = 0.01 s), against
         ρ u² C_f ≈ 3e2 Pa of a real wall — at the tsunami's coarse level it lifted the front
-        wall with meganewtons as the water ran up it (docs/tsunami-history.md)."""
+        wall with meganewtons as the water ran up it (docs/design-notes.md)."""
         if not self.slip:
             return slip_velocity
         n = self.wall_normal()

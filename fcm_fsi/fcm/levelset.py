@@ -295,8 +295,8 @@ def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, st
     floor's 0 under a block), the owner's where the fill ends, the mean where two are equally
     near, also where a block lands beside a fixed stopper on the floor (three owners) — and
     hence in time as gaps open and close. A fill velocity that jumps from one owner's to
-    another's as a node changes side gave the pressure impulses of docs/coupling.md
-    (block_overturn, session 22)."""
+    another's as a node changes side gave pressure impulses on the block of block_overturn
+    (docs/design-notes.md)."""
     tests = 0
     for i in numba.prange(x.shape[0]):
         best = cutoff

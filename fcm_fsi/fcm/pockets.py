@@ -6,7 +6,7 @@ while the corner is still ≈ δ above it, and seals the water between block, st
 into a pocket of its own. That pocket is incompressible and has no outlet, so the block's
 further descent meets an infinitely stiff cushion: in block_overturn (30°, full level) a
 784 mm² pocket sealed at ≈ 0.913 s and the next steps gave the 10 N block kicks of ±5 kN
-(docs/coupling.md, session 23). In the real gap the water drains until the surfaces touch.
+(docs/design-notes.md). In the real gap the water drains until the surfaces touch.
 
 :class:`PocketVents` finds the connected components of the fluid nodes (over the mesh cells,
 across MPI ranks) and, while some component other than the largest exists, gives the nodes
@@ -29,12 +29,12 @@ sliver stays benign (|F_y| < 7 N). The pocket that made the vents (the 784 mm² 
 landing, 36 nodes) holds whole cells. A bound on depth does not separate the two: the fill's
 level is (g − δ)/2 in a gap g, so the landing pocket is only 3.7 mm deep; nor does venting
 only closing gaps (the landing pocket, sealed while the block rebounded, kicked the block
-with 36 kN at 0.924 s; docs/coupling.md, session 24).
+with 36 kN at 0.924 s; docs/design-notes.md).
 
 A vent leaves the pocket joined to the rest through a slit narrower than a cell, and the flow
 the discrete slit lets through then sets the pocket's pressure: under the 30° block of
 block_overturn lying on the stopper and the floor and sliding at 5–10 cm/s, ≈ 2,000 Pa against
-≈ 1,300 Pa around it (2.9 N of lift on the 10 N block, docs/coupling.md, session 28). With
+≈ 1,300 Pa around it (2.9 N of lift on the 10 N block, docs/coupling.md). With
 ``coupling.drain_pockets`` :meth:`PocketVents.drainable` names the pockets as the fill seals
 them and the main fluid's nodes nearest to each (its rim), and the coupled model holds their
 pressure at the rim's, moved hydrostatically — in 3D that water passes the block's sides.

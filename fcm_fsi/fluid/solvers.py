@@ -9,7 +9,7 @@ Defaults (measured in docs/performance.md):
   ``selfp`` approximation S ≈ A_pp − A_pu diag(A_uu)⁻¹ A_up (A_pp is the PSPG pressure
   Laplacian), one BoomerAMG V-cycle (HMIS, ext+i, θ = 0.5 for 3D) per block: Krylov iterations
   independent of the mesh size.
-- ``SCHUR_GAMG`` (the 3D default since session 7): the same split with PETSc's smoothed-
+- ``SCHUR_GAMG`` (the 3D default): the same split with PETSc's smoothed-
   aggregation GAMG on the velocity block (BoomerAMG on the Schur complement). Its V-cycle on the
   3-component velocity block is ≈ 3× cheaper than BoomerAMG's at 1.1M unknowns, for a few more
   Krylov iterations; with the preconditioner built once per time step
@@ -72,8 +72,8 @@ def make_ksp(comm, A: PETSc.Mat, prefix: str, options: dict,
     # The options stay in PETSc's table until the first solve has set the solver up: the
     # preconditioner's parts read theirs only then (bjacobi's sub_*, fieldsplit_*, the factor's
     # mat_mumps_*). :func:`solve` then removes them, so that a later solver with the same
-    # prefix does not inherit them. (Until session 33 they were removed here, and every
-    # set-up-time option in a case file was silently ignored.)
+    # prefix does not inherit them. (Removing them here, before the set-up, would silently
+    # ignore every set-up-time option in a case file.)
     _PENDING[ksp.handle] = (prefix, [f"{prefix}{key}" for key in options])
     return ksp
 

@@ -9,7 +9,7 @@ same case (its fingerprint is stored) and, by policy, the same number of ranks; 
 else is refused with a message. The file is written to a temporary name and renamed,
 so a crash while writing leaves the previous checkpoint intact. The checkpoint it replaces
 is kept as ``<name>.previous.h5`` (one interval earlier): a run that went wrong without
-diverging — e.g. a block kicked by one bad step (docs/coupling.md, session 21) — can then
+diverging — e.g. a block kicked by one bad step — can then
 still be continued from before the event that the newest checkpoint already contains.
 """
 from __future__ import annotations
@@ -30,13 +30,14 @@ from ..config.loader import ConfigError, to_dict
 # the code did before the option existed. A checkpoint hashed without such an option is still
 # accepted when the case leaves the option at that value (and only then). Add new options here.
 # The section is a dotted path; a trailing "[]" names a list whose every entry has the option.
+# Listed in the order the options were added.
 ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
-    ("coupling", "load_split", "owner"),        # session 14
-    ("coupling", "wall_motion", "block"),       # session 15
-    ("dem.blocks[]", "bonded", False),          # session 16
-    ("coupling", "added_mass_model", "volume"),  # session 17
-    ("dem.structure", "foundation", 0.0),       # session 19
-    ("fluid", "mass_consistent_convection", False),  # session 20
+    ("coupling", "load_split", "owner"),
+    ("coupling", "wall_motion", "block"),
+    ("dem.blocks[]", "bonded", False),
+    ("coupling", "added_mass_model", "volume"),
+    ("dem.structure", "foundation", 0.0),
+    ("fluid", "mass_consistent_convection", False),
 )
 
 
@@ -58,8 +59,8 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
     ``phase_field.petsc`` — e.g. a direct solver after an iterative one broke down; they change
     the solution only at solver tolerance) and ``run.cfl_gas`` (a restart may loosen the step rule
     in the gas when spurious gas jets throttle a run; it changes the solution at the level of the
-    time discretisation error, like the CFL-adapted steps themselves). ``legacy``: the hash of checkpoints written before
-    session 14, which still covered the solver options (such checkpoints are still accepted).
+    time discretisation error, like the CFL-adapted steps themselves). ``legacy``: the hash of the oldest
+    checkpoints, which still covered the solver options (such checkpoints are still accepted).
     ``without``: (section, key) options left out, as in checkpoints written before they existed."""
     data = to_dict(case)
     for key in ("t_end", "log_every", "output_every", "checkpoint_every"):
@@ -68,10 +69,10 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
         for section, keys in (("fluid", ("petsc", "reuse_preconditioner")), ("phase_field", ("petsc",))):
             for key in keys:
                 (data.get(section) or {}).pop(key, None)
-    for key in ("preconditioner_steps", "preconditioner_max_iterations"):   # solver options (session 20)
+    for key in ("preconditioner_steps", "preconditioner_max_iterations"):   # solver options
         (data.get("fluid") or {}).pop(key, None)
-    data["run"].pop("cfl_gas", None)   # the gas's Courant bound: a restart may loosen it (session 21)
-    # how the coupling's fixed point is solved (session 31): changes the solution at iteration_tol
+    data["run"].pop("cfl_gas", None)   # the gas's Courant bound: a restart may loosen it
+    # how the coupling's fixed point is solved: changes the solution at iteration_tol
     (data.get("coupling") or {}).pop("iteration_method", None)
     for section, key in without:
         for holder in _option_holders(data, section):

@@ -35,7 +35,7 @@ this is exact; in a transient it lags by one fluid step, O(Δt ȧ). aⁿ is the 
 the wall velocity the fluid is given (``coupling.wall_velocity``: end-of-step or mean velocities), since the
 fluid's added-mass reaction answers that change: with ``mean``, an impact in the middle of a step shows in
 the fluid as two half-changes over two steps, and the end-of-step difference (the whole change in the first
-step, none in the second) left ±½ m̃ Δv/Δt uncancelled — a spurious bounce (docs/coupling.md, session 25).
+step, none in the second) left ±½ m̃ Δv/Δt uncancelled — a spurious bounce (docs/design-notes.md).
 """
 from __future__ import annotations
 
@@ -967,8 +967,8 @@ class CoupledModel:
 
         Why not the end-of-step v, ω: the fluid never sees them in those modes, so iterating on
         them fed the fluid a velocity the explicit step does not (the end-of-step one) and
-        measured the bonds' ringing, which no pass can converge (session 26: every step of the
-        tsunami's σ_c/4 run took the 6 passes allowed, residual 1e-4…3e-2)."""
+        measured the bonds' ringing, which no pass can converge (in the tsunami case with σ_c/4
+        every step took the 6 passes allowed, residual 1e-4…3e-2)."""
         _, V, W = self._wall_motion()
         return np.concatenate([V, W * self.gyration[:, None]]).ravel()
 
@@ -1148,7 +1148,7 @@ class CoupledModel:
         boundaries no energy enters (slip, no-slip and do-nothing walls; damping zones only
         take it out), so exceeding it means the run has diverged — the check that stops a run
         whose loads and speeds have run away while φ and the block steps stay in range
-        (docs/coupling.md, session 17). None (no check) with inflow boundaries."""
+        (docs/coupling.md). None (no check) with inflow boundaries."""
         fl = self.case.fluid
         if any(bc.kind in ("velocity", "parabolic_inflow") for bc in fl.boundaries):
             return None

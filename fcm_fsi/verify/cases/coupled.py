@@ -149,7 +149,7 @@ def floating_box(level, out_dir: Path, comm) -> list[Metric]:
     data = case_at_level("floating_box", level, out_dir, shorter_coarser(3.0, [100, 25]))
     if level == "full":
         # half the cells, half the step (Δt/h as at the quick level); runs through since the
-        # wall penalty takes the cell-wise density (docs/coupling.md, session 10)
+        # wall penalty takes the cell-wise density (docs/design-notes.md)
         data["run"]["dt"] = data["run"]["dt_max"] = 1.0e-3
     series, wall, failure = run_coupled(data, out_dir, comm)
     blk = data["dem"]["blocks"][0]
@@ -220,9 +220,9 @@ def dam_break_block(level, out_dir: Path, comm) -> list[Metric]:
     volume_error: the largest relative change of the liquid volume {φ ≥ ½} in the *fluid
     part* (``liquid_volume_error`` in series.csv: the exact whole-mesh volume, which the
     volume correction holds, minus the liquid inside the blocks) — the phase field is solved
-    on the whole mesh, so water that diffuses into a block counts as lost. (Until this
-    session it was ∫ φ c_f, ``water_fluid_error``, which the volume correction does not hold:
-    it also moves with the interface profile.)
+    on the whole mesh, so water that diffuses into a block counts as lost. (Not ∫ φ c_f,
+    ``water_fluid_error``, which the volume correction does not hold: it also moves with the
+    interface profile.)
     The block 'moved' when its centre travelled more than its own width, and 'tumbled' when
     it turned by more than 90° (onto another face) at some time; both only in a run that
     reached t_end."""

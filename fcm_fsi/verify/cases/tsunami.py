@@ -17,12 +17,12 @@ and ``back_wall_peak_traction``: the largest traction / σ_c a back-wall bond po
 (from the final checkpoint's λ_max; 1 = its strength reached, a break needs λ = 1), how close
 the paper's second failure came.
 
-The case's σ_c (2.112e6 Pa since session 31) is the paper's identification (§4(4)) applied to
+The case's σ_c (2.112e6 Pa) is the paper's identification (§4(4)) applied to
 our joints: a column in three-point bending as strong as plain C30 concrete
 (:mod:`fcm_fsi.dem.strength`); at the full level the paper's sequence is required
 (``back_wall_fails_after_front``). ``tsunami_building_paper_sigma`` runs the same case with the
 paper's number, 1.0e7 Pa, which our joints turn into 4.7 × C30's flexural strength: its breaks
-are reported, not required (docs/tsunami-history.md, sessions 22 and 30).
+are reported, not required (docs/tsunami.md, docs/design-notes.md).
 """
 from __future__ import annotations
 
