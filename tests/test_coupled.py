@@ -221,7 +221,7 @@ def test_a_block_landing_in_water_rebounds_less_than_its_dry_restitution(tmp_pat
     so the block may not leave faster than 0.2 × its impact speed. With the largest eigenvalue
     of the added-mass tensor as a scalar (``potential``: 1.8 kg, where the tensor's smallest is
     0.3 kg) the lagged correction returned the stop as a bounce of 0.56 × the impact speed (0.70
-    with the end-of-step acceleration; docs/coupling.md); with the tensor, 0.06.
+    with the end-of-step acceleration; docs/design-notes.md); with the tensor, 0.06.
     Run without the hidden-surface pressure (``hydrostatic``'s buoyancy under the fill slows
     the approach to 0.32 m/s and then bounces the block off the trapped film at 0.24 × that
     speed, an open defect of the landing, docs/coupling.md); the added-mass model is what this

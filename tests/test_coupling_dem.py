@@ -398,7 +398,7 @@ def test_a_coupled_run_whose_kinetic_energy_exceeds_what_the_system_has_stops(on
     g × mass × height; no inflow) is a divergence with a message; below it, or without a bound
     (inflow boundaries), the fluid's own verdict stands. The bonded wall with added_mass 2 ×
     the potential estimate ran on for 0.07 s at 100–250 m/s with φ in range before this
-    check (docs/coupling.md)."""
+    check (docs/design-notes.md)."""
     from types import SimpleNamespace
 
     from fcm_fsi.simulation.coupled import CoupledModel

@@ -17,7 +17,7 @@ class CouplingConfig:
                                       "every body's added mass (at R/h = 6.4: 1.66 ρV against 1.04; with wall_slip "
                                       "and γ = 10: 1.08), but γ = 10 with wall_slip diverged where a free surface meets a "
                                       "block (floating_box, bonded_wall_surge) and the coupled verification cases "
-                                      "were measured with 1e4 (docs/coupling.md)", gt=0, le=1e8)
+                                      "were measured with 1e4 (docs/design-notes.md)", gt=0, le=1e8)
     fictitious_factor: float = param(1.0e-3, doc="α: the solid part of each cell carries the fluid equations "
                                                  "scaled by α (keeps tiny cut cells regular)", gt=0, lt=1)
     wall: Literal["penalty", "pressure", "nitsche"] = param(
@@ -49,7 +49,7 @@ class CouplingConfig:
         1.0, doc="β of the cut-cell extension: the solid part of every cut cell carries a Brinkman term "
                  "β ρ/Δt (u − ū) (its reaction is part of the block load) and β × the PSPG term, so nodes with "
                  "tiny fluid support follow the wall and the pressure extends smoothly into the body; 0 = off "
-                 "(then the full floating_box level diverges at the contact line, docs/coupling.md)", ge=0, le=100)
+                 "(then the full floating_box level diverges at the contact line, docs/design-notes.md)", ge=0, le=100)
     gap_fill: float | None = param(
         None, unit="m", doc="fluid gaps narrower than this between a block and a DEM plane/box wall or another block "
                             "count as solid: level set min(φ, (d₁ + d₂ − δ)/2) over the two nearest owners, the fill's "

@@ -5,7 +5,7 @@ Why: the explicit coupling is stable only while the added-mass stabilisation m̃
 fluid's real added mass m_a (module docstring of ``simulation.coupled``). A fixed C_a ρ V_b
 cannot: a piece of debris approaching the floor or a neighbour drives the water out of the
 closing gap, and its added mass grows like ρL³/(12 g) per unit depth as the gap g closes
-(docs/coupling.md, "Bonded wall"). This module computes m_a of each moving body, or of each
+(docs/design-notes.md). This module computes m_a of each moving body, or of each
 bonded cluster, on the same mesh, cut and density field as the fluid, every fluid step.
 
 The problem (pressure impulse of a unit rigid acceleration; Batchelor §6.4): for a mode

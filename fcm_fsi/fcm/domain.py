@@ -273,7 +273,7 @@ class CutDomain:
         constant per cell. With the P1 ρ(φ) it is cubic; where Γ runs within a few hundredths
         of h of a row of mesh nodes the fitted weights are large and of both signs, the matrix
         loses definiteness by γ ρ h/Δt × the density's variation over the cell, and a box whose
-        face came to rest there in air blew up within 0.01 s (docs/coupling.md)."""
+        face came to rest there in air blew up within 0.01 s (docs/design-notes.md)."""
         return self.gamma * (parts.cell_viscosity / h + parts.cell_density * h / parts.dt)
 
     def wall_normal(self):
