@@ -43,3 +43,10 @@ def test_repeated_runs_report_the_median_times():
     runs = [{"process": p, "solver": s, "steps": 76, "dev": 0.3} for p, s in ((9.0, 7.0), (12.0, 9.0), (10.0, 8.5))]
     m = peer.median_run(runs)
     assert (m["process"], m["solver"], m["steps"], m["repeats"]) == (10.0, 8.5, 76, 3)
+
+
+def test_load_error_is_the_relative_l1_distance_of_the_histories():
+    t = np.linspace(0.0, 1.0, 201)
+    ref = {"t": t, "fx": np.full_like(t, 100.0)}
+    assert peer.load_error({"t": t[::2], "fx": np.full(101, 110.0)}, ref) == pytest.approx(0.1)
+    assert peer.load_error(ref, ref) == 0.0

@@ -2,6 +2,7 @@
 
     python -m fcm_fsi.bench peer [--levels quick full] [--np 1] [--repeat 3] [--out bench_peer]
     python -m fcm_fsi.bench peer --impact 0.23 1.0 --np 2      (3D dam break onto a fixed box)
+    python -m fcm_fsi.bench peer --impact-study 1.0 --np 2      (the same at several sizes in both codes)
 
 Case: Martin & Moyce's dam break (``verify dam_break``): quick = a/8 (48 × 20 cells), full =
 a/20 (120 × 50 cells), to T = 3.47. Ours runs as a user would, ``python -m fcm_fsi.verify
@@ -102,6 +103,60 @@ def load_measures(r: dict) -> dict:
     return {"peak": float(r["fx"][i]), "t_peak": float(r["t"][i]), "impulse": float(np.trapz(r["fx"], r["t"]))}
 
 
+def load_error(r: dict, ref: dict) -> float:
+    """Mean |F_x − F_x,ref| over the reference's time span, relative to the mean |F_x,ref|:
+    the load history's error against a reference run (both interpolated to its times)."""
+    t = ref["t"]
+    f = np.interp(t, r["t"], r["fx"])
+    return float(np.trapz(np.abs(f - ref["fx"]), t) / np.trapz(np.abs(ref["fx"]), t))
+
+
+def study_table(runs: list[tuple[str, float, dict]], ref: dict) -> str:
+    """One line per run of the mesh study: who, cell edge, cells, solver wall, steps, impulse and
+    the load-history and impulse errors against ``ref``."""
+    imp_ref = load_measures(ref)["impulse"]
+    lines = [f"{'who':<10}{'size m':>8}{'cells':>10}{'solver s':>10}{'steps':>7}{'impulse N s':>13}"
+             f"{'impulse err':>12}{'history err':>12}"]
+    for who, size, r in runs:
+        imp = load_measures(r)["impulse"]
+        lines.append(f"{who:<10}{size:>8.3f}{r['cells']:>10d}{r['solver']:>10.1f}{r['steps']:>7d}{imp:>13.0f}"
+                     f"{(imp - imp_ref) / imp_ref:>12.3f}{load_error(r, ref):>12.3f}")
+    return "\n".join(lines)
+
+
+def study_plot(runs: list[tuple[str, float, dict]], path: Path) -> None:
+    """F_x(t) of every run of the study, ours solid, interFoam dashed."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for who, size, r in runs:
+        ax.plot(r["t"], r["fx"] / 1e3, "-" if who == "fcm_fsi" else "--", lw=1.2,
+                label=f"{who} {size:g} m ({r['cells'] / 1e3:.0f}k cells)")
+    ax.set_xlabel("t [s]"), ax.set_ylabel("F_x on the box [kN]"), ax.legend(fontsize=7), ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def impact_study(ours_sizes: list[float], foam_sizes: list[float], t_end: float, ranks: int, out: Path) -> str:
+    """The impact case at several cell sizes in both codes (interFoam's only when on PATH); the
+    finest interFoam run is the reference of the errors (else our finest)."""
+    runs = []
+    for size in ours_sizes:
+        runs.append(("fcm_fsi", size, impact_ours(size, t_end, ranks, out / f"study_ours_{size:g}")))
+        print(study_table(runs[-1:], runs[-1][2]).split("\n")[1], flush=True)
+    if _openfoam.interfoam_available():
+        for size in foam_sizes:
+            runs.append(("interFoam", size, impact_interfoam(size, t_end, ranks, out / f"study_foam_{size:g}")))
+            print(study_table(runs[-1:], runs[-1][2]).split("\n")[1], flush=True)
+    ref = min(runs, key=lambda r: (r[0] != "interFoam", r[1]) if _openfoam.interfoam_available() else r[1])[2]
+    for who, size, r in runs:
+        np.savetxt(out / f"study_{who}_{size:g}.csv", np.c_[r["t"], r["fx"]], delimiter=",", header="t [s],fx [N]")
+    study_plot(runs, out / "peer_impact_study.png")
+    return study_table(runs, ref)
+
+
 def median_run(runs: list[dict]) -> dict:
     """One run's record with the median process and solver times of repeated identical runs
     (the accuracy measures and steps are the same in each)."""
@@ -158,9 +213,21 @@ def run(argv: list[str]) -> int:
     ap.add_argument("--impact", type=float, nargs=2, metavar=("SIZE", "T_END"),
                     help="instead: the 3D dam break onto a fixed box (cases/impact_box_3d.yaml) with cells of "
                          "SIZE m (0.23: 114k tetrahedra) to T_END s, interFoam with as many hex cells")
+    ap.add_argument("--impact-study", type=float, metavar="T_END",
+                    help="instead: the 3D impact to T_END s at the cell sizes of --ours and --foam (a mesh study; "
+                         "errors against the finest interFoam run)")
+    ap.add_argument("--ours", type=float, nargs="+", default=[0.35, 0.23, 0.17], help="--impact-study: our cell sizes [m]")
+    ap.add_argument("--foam", type=float, nargs="+", default=[0.3, 0.2, 0.14, 0.1],
+                    help="--impact-study: interFoam's hex sizes [m]")
     args = ap.parse_args(argv)
+    args.out = args.out.resolve()     # OpenFOAM's tools run inside the case folders
     args.out.mkdir(parents=True, exist_ok=True)
     have_foam = _openfoam.interfoam_available()
+    if args.impact_study:
+        text = impact_study(args.ours, args.foam, args.impact_study, args.np[0], args.out)
+        print("\n" + text)
+        (args.out / "peer_impact_study.txt").write_text(text + "\n")
+        return 0
     if args.impact:
         size, t_end = args.impact
         texts = []
