@@ -185,3 +185,59 @@ def test_reference_blas_is_detected_from_the_loaded_libraries():
     assert not reference_blas_loaded(openblas)
     assert not reference_blas_loaded(ref + openblas)
     assert not reference_blas_loaded("")
+
+
+@pytest.mark.parametrize("content, expected", [
+    (b"\x00\x01\x02\x03binary", "is not a text file"),
+    ("name: Größe\n".encode("latin-1"), "line 1 is not UTF-8 text (byte 0xf6"),
+    (b"", "is empty"),
+    (b"   \n# only a comment\n", "is empty"),
+    (b"- run\n- mesh\n", "is a list, not a mapping"),
+    (b"42\n", "is a number, not a mapping"),
+    (b"name: a\nname: b\n", "key 'name' appears twice"),
+])
+def test_files_that_are_not_a_yaml_mapping_of_text_are_one_line(tmp_path, content, expected):
+    f = tmp_path / "case.yaml"
+    f.write_bytes(content)
+    with pytest.raises(ConfigError) as err:
+        load_case(f)
+    assert str(err.value).startswith(str(f)) and expected in str(err.value) and "\n" not in str(err.value)
+
+
+def test_every_resolution_level_is_validated_and_named():
+    path = ROOT / "cases" / "tsunami_impact_2d.yaml"
+    with pytest.raises(ConfigError, match=r"\[resolution 'medium'\]: key 'resolutions.medium.mesh.size': = inf"):
+        load_case(path, ["resolutions.medium.mesh.size=.inf"])
+    with pytest.raises(ConfigError, match=r"\[resolution 'paper'\]: key 'resolutions.paper.dem.dt': = nan"):
+        load_case(ROOT / "cases" / "tsunami_building.yaml", ["resolutions.paper.dem.dt=.nan"])
+    # a key of the base case that only one level breaks is named as the base key, in that level
+    with pytest.raises(ConfigError, match=r"\[resolution 'fine'\]: .*mesh.structure_band"):
+        load_case(path, ["resolutions.fine.mesh.structure_band={size: 0.5}"])
+    import yaml
+    with pytest.raises(ConfigError, match=r"key 'resolutionx': is not a known key; did you mean 'resolution'"):
+        data = yaml.safe_load(path.read_text())
+        data["resolutionx"] = data.pop("resolution")
+        case_from_dict(data)
+
+
+@pytest.mark.parametrize("option, expected", [
+    ("ksp_gmres_restart=.nan", "'fluid.petsc.ksp_gmres_restart': = nan must be a finite number"),
+    ("ksp_rtol=.inf", "must be a finite number"),
+    ("ksp_rtol=-1.0e-6", "'fluid.petsc.ksp_rtol' = -1e-06: must be a number > 0"),
+    ("ksp_max_it=2.5", "'fluid.petsc.ksp_max_it' = 2.5: must be an integer >= 1"),
+    ("ksp_type=gmress", "is not a ksp type of this PETSc (did you mean 'gmres'?)"),
+    ("sub_pc_type=iluu", "'fluid.petsc.sub_pc_type' = 'iluu' is not a pc type"),
+    ("pc_factor_mat_solver_type=mumsp", "did you mean 'mumps'?"),
+    ("ksp_rtoll=1e-6", "did you mean 'fluid.petsc.ksp_rtol'?"),
+    ("-ksp_rtol=1e-6", "without the prefix and the leading '-'"),
+])
+def test_petsc_options_are_checked_before_a_solver_exists(option, expected):
+    with pytest.raises(ConfigError) as err:
+        load_case(ROOT / "cases" / "impact_box_3d.yaml", [f"fluid.petsc.{option}"])
+    assert expected in str(err.value)
+
+
+def test_petsc_options_unknown_to_us_but_not_near_a_common_one_pass():
+    case = load_case(ROOT / "cases" / "impact_box_3d.yaml", ["fluid.petsc.mat_mumps_icntl_7=5",
+                                                             "phase_field.petsc.ksp_monitor_true_residual=true"])
+    assert case.fluid.petsc["mat_mumps_icntl_7"] == 5

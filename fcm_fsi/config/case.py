@@ -1,6 +1,8 @@
 """The whole case file: one frozen dataclass per section."""
 from __future__ import annotations
 
+import copy
+import difflib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -8,7 +10,7 @@ from .coupling import CouplingConfig
 from .dem import DEMConfig
 from .fields import param
 from .fluid import FluidConfig
-from .loader import ConfigError, apply_override, build, read_yaml
+from .loader import ConfigError, Variant, apply_override, build, read_yaml
 from .mesh import MeshConfig
 from .output import OutputConfig
 from .phase_field import PhaseFieldConfig
@@ -32,7 +34,8 @@ class Case:
 
     def __post_init__(self) -> None:
         if self.phase_field is None and self.fluid is None and self.dem is None:
-            raise ConfigError("the case has no physics: give at least one of phase_field, fluid, dem")
+            raise ConfigError("keys 'phase_field', 'fluid', 'dem' are all missing: the case has no physics "
+                              "(give at least one)")
         if (self.phase_field is not None or self.fluid is not None) and self.mesh is None:
             raise ConfigError("key 'mesh' is required when phase_field or fluid is given")
         pf = self.phase_field
@@ -72,8 +75,10 @@ RESOLUTION_DOC = """\
 Resolution levels: a case may list named variants under the top-level key `resolutions`
 (name → a mapping with the same layout as the case, merged over it) and pick one with
 `resolution: <name>` (or `--set resolution=<name>`). Example: `cases/tsunami_building.yaml`
-(`coarse`, `paper`). The merge replaces scalars and lists and descends into mappings; the
-merged case is validated as usual."""
+(`coarse`, `paper`). The merge replaces scalars and lists and descends into mappings. Every
+variant is validated merged over the case, the chosen one and the others alike (an error names
+the variant and the key, e.g. `resolutions.paper.dem.dt`), so that a level nobody has picked yet
+cannot fail only on the day it is picked."""
 
 
 def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
@@ -83,35 +88,67 @@ def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> 
     Precedence: case file < resolution level < overrides. The overrides are applied before
     the merge (so that ``resolution=paper`` or ``resolutions.coarse.…`` choose and edit the
     level) and again after it, so that an option the level also sets (e.g. ``dem.dt``) takes
-    the command line's value instead of being silently replaced by the level's."""
+    the command line's value instead of being silently replaced by the level's. Every other
+    level is validated too, with the same overrides."""
     data = read_yaml(Path(path))
     for assignment in overrides:
         apply_override(data, assignment)
-    merged = apply_resolution(data, str(path))
-    for assignment in overrides:
-        if assignment.split("=", 1)[0].strip().split(".")[0] not in ("resolution", "resolutions"):
-            apply_override(merged, assignment)
-    return build(Case, merged, source=str(path))
+    later = [a for a in overrides
+             if a.split("=", 1)[0].strip().split(".")[0] not in ("resolution", "resolutions")]
+    return _build_levels(data, str(path), later)
 
 
 def case_from_dict(data: dict, source: str = "<dict>") -> Case:
-    """Build a case from a mapping (tests and the verification runner)."""
-    return build(Case, apply_resolution(data, source), source=source)
+    """Build a case from a mapping (tests and the verification runner); every resolution level
+    is validated as by :func:`load_case`."""
+    return _build_levels(data, source, [])
+
+
+def _build_levels(data: dict, source: str, overrides: list[str]) -> Case:
+    """The case of the chosen level; the other levels are built (validated) and dropped."""
+    levels, chosen = _levels(data, source)
+    base = {k: v for k, v in data.items() if k not in ("resolutions", "resolution")}
+    order = [chosen] + [name for name in levels if name != chosen] if levels else [None]
+    cases = []
+    for name in order:
+        merged = copy.deepcopy(base if name is None else _merged(base, levels[name]))
+        for assignment in overrides:
+            apply_override(merged, assignment)
+        variant = None if name is None else Variant(name, levels[name])
+        where = source if name is None else f"{source} [resolution '{name}']"
+        cases.append(build(Case, merged, source=where, variant=variant))
+    return cases[0]
 
 
 def apply_resolution(data: dict, source: str) -> dict:
     """``data`` with the chosen ``resolutions[resolution]`` merged in and both keys removed."""
-    data = dict(data)
-    levels = data.pop("resolutions", None)
-    chosen = data.pop("resolution", None)
+    levels, chosen = _levels(data, source)
+    base = {k: v for k, v in data.items() if k not in ("resolutions", "resolution")}
+    return base if levels is None else _merged(base, levels[chosen])
+
+
+def _levels(data: dict, source: str) -> tuple[dict | None, str | None]:
+    """(``resolutions``, ``resolution``) of a case mapping, checked; (None, None) without levels."""
+    levels = data.get("resolutions")
+    chosen = data.get("resolution")
     if levels is None and chosen is None:
-        return data
+        return None, None
     if not isinstance(levels, dict) or not levels or not all(isinstance(v, dict) for v in levels.values()):
         raise ConfigError(f"{source}: key 'resolutions' must map level names to case mappings "
                           f"(needed when 'resolution' is given)")
+    bad = [k for k in levels if not isinstance(k, str)]
+    if bad:
+        raise ConfigError(f"{source}: key 'resolutions': level name {bad[0]!r} must be text")
+    if chosen is None:
+        close = difflib.get_close_matches("resolution", [k for k in data if isinstance(k, str)
+                                                         and k not in ("resolution", "resolutions")], n=1, cutoff=0.8)
+        if close:
+            raise ConfigError(f"{source}: key '{close[0]}': is not a known key; did you mean 'resolution'?")
+        raise ConfigError(f"{source}: key 'resolution' is required with 'resolutions': one of "
+                          f"{', '.join(map(repr, levels))}")
     if chosen not in levels:
         raise ConfigError(f"{source}: key 'resolution' = {chosen!r}: allowed {', '.join(map(repr, levels))}")
-    return _merged(data, levels[chosen])
+    return levels, chosen
 
 
 def _merged(base: dict, extra: dict) -> dict:

@@ -6,6 +6,7 @@ from typing import Literal
 
 from .fields import param
 from .loader import ConfigError
+from .petsc import check_petsc_options
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -148,3 +149,4 @@ class FluidConfig:
         for i, bc in enumerate(self.boundaries):
             if bc.kind == "velocity" and len(bc.value) not in (2, 3):
                 raise ConfigError(f"key 'fluid.boundaries[{i}].value' = {list(bc.value)} must have 2 or 3 entries")
+        check_petsc_options("fluid.petsc", self.petsc)

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
+import re
 import types
 import typing
 from pathlib import Path
@@ -53,11 +55,36 @@ def type_name(tp: Any) -> str:
     return {float: "number", int: "integer", bool: "true/false", str: "text"}.get(tp, str(tp))
 
 
+class Variant(typing.NamedTuple):
+    """A resolution variant being validated: its name and its own mapping (``resolutions.NAME``),
+    so that an error in a value the variant sets names it as ``resolutions.NAME.key``."""
+
+    name: str
+    overlay: dict
+
+
+def _set_by(overlay: dict, key: str) -> bool:
+    """True when the dotted/indexed ``key`` (e.g. ``mesh.refine[0].size``) takes its value from
+    ``overlay``: the variant sets it or a list or scalar above it (the merge replaces those)."""
+    node: Any = overlay
+    for part in re.split(r"\.|\[", key):
+        if not isinstance(node, dict):
+            return True
+        part = part.rstrip("]")
+        if part not in node:
+            return False
+        node = node[part]
+    return True
+
+
 class _Ctx:
-    def __init__(self, source: str):
+    def __init__(self, source: str, variant: Variant | None = None):
         self.source = source
+        self.variant = variant
 
     def fail(self, key: str, msg: str) -> typing.NoReturn:
+        if key and self.variant is not None and _set_by(self.variant.overlay, key):
+            key = f"resolutions.{self.variant.name}.{key}"
         where = f"key '{key}'" if key else "top level"
         raise ConfigError(f"{self.source}: {where}: {msg}")
 
@@ -73,7 +100,7 @@ def _convert(ctx: _Ctx, key: str, tp: Any, value: Any, meta: dict) -> Any:
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             ctx.fail(key, f"must be a mapping of keys, got {value!r}")
-        return build(tp, value, ctx.source, prefix=key)
+        return build(tp, value, ctx.source, prefix=key, variant=ctx.variant)
     if origin is Literal:
         choices = get_args(tp)
         if value not in choices:
@@ -100,6 +127,8 @@ def _convert(ctx: _Ctx, key: str, tp: Any, value: Any, meta: dict) -> Any:
         for k, v in value.items():
             if not isinstance(v, (str, int, float, bool)) and v is not None:
                 ctx.fail(f"{key}.{k}", f"= {v!r} must be a number, text, true/false or null")
+            if isinstance(v, float) and not math.isfinite(v):
+                ctx.fail(f"{key}.{k}", f"= {v!r} must be a finite number")
         return dict(value)
     if tp is bool:
         if not isinstance(value, bool):
@@ -137,9 +166,11 @@ def _check_range(ctx: _Ctx, key: str, value: float, meta: dict) -> None:
                       + (f" ({unit})" if unit != "-" else ""))
 
 
-def build(cls: type, data: dict, source: str = "<case>", prefix: str = "") -> Any:
-    """Build dataclass ``cls`` from a mapping, strictly (unknown keys are errors)."""
-    ctx = _Ctx(source)
+def build(cls: type, data: dict, source: str = "<case>", prefix: str = "",
+          variant: Variant | None = None) -> Any:
+    """Build dataclass ``cls`` from a mapping, strictly (unknown keys are errors). ``variant``:
+    the resolution variant merged into ``data``, named in errors of the keys it sets."""
+    ctx = _Ctx(source, variant)
     hints = get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     for k in data:
@@ -165,19 +196,65 @@ def build(cls: type, data: dict, source: str = "<case>", prefix: str = "") -> An
     return obj
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last
+    silently, so a duplicated section would replace the first without a word)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen: dict = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            try:
+                first = seen.setdefault(key, key_node.start_mark.line + 1)
+            except TypeError:           # an unhashable key: PyYAML reports it below
+                continue
+            if first != key_node.start_mark.line + 1:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} appears twice in one mapping (lines {first} and "
+                    f"{key_node.start_mark.line + 1})", key_node.start_mark)
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_yaml(path: Path) -> dict:
-    """Read a YAML mapping; a missing or malformed file is a one-line ConfigError."""
+    """Read a case file: a YAML mapping of sections in UTF-8 text. A missing, unreadable, binary,
+    empty or otherwise malformed file is one ConfigError line naming the file and the problem."""
     path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a directory, not a case file")
     if not path.is_file():
         raise ConfigError(f"{path}: case file not found")
     try:
-        data = yaml.safe_load(path.read_text())
+        raw = path.read_bytes()
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read the case file ({err.strerror})") from None
+    if b"\x00" in raw:
+        raise ConfigError(f"{path}: is not a text file (it contains NUL bytes at offset {raw.index(0)}): "
+                          "a case file is YAML text")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = raw[:err.start].count(b"\n") + 1
+        raise ConfigError(f"{path}: line {line} is not UTF-8 text (byte 0x{raw[err.start]:02x} at offset "
+                          f"{err.start}): save the case file as UTF-8") from None
+    try:
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}:{where} is not valid YAML ({getattr(err, 'problem', err)})") from None
+        raise ConfigError(f"{path}:{where} is not valid YAML ({getattr(err, 'problem', None) or err})") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: is not valid YAML (nested too deeply)") from None
+    if data is None:
+        raise ConfigError(f"{path}: is empty: a case file is a mapping of sections (name, run, mesh, …; "
+                          "docs/case-reference.md)")
     if not isinstance(data, dict):
-        raise ConfigError(f"{path}: a case file must be a mapping of sections")
+        kind = {list: "a list", str: "a single text", int: "a number", float: "a number", bool: "true/false"}.get(
+            type(data), type(data).__name__)
+        raise ConfigError(f"{path}: is {kind}, not a mapping: a case file is a mapping of sections "
+                          "(name, run, mesh, …; docs/case-reference.md)")
+    bad = [k for k in data if not isinstance(k, str)]
+    if bad:
+        raise ConfigError(f"{path}: top level: key {bad[0]!r} is not a name (section names are text)")
     return data
 
 

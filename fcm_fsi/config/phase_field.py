@@ -6,6 +6,7 @@ from typing import Literal
 
 from .fields import param
 from .loader import ConfigError
+from .petsc import check_petsc_options
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,3 +74,5 @@ class PhaseFieldConfig:
                         doc="PETSc options of the φ solve (prefix pf_); the default GMRES + block-Jacobi/ILU "
                             "suits the mass-dominated system; tight tolerances keep ∫φ conserved")
 
+    def __post_init__(self) -> None:
+        check_petsc_options("phase_field.petsc", self.petsc)
