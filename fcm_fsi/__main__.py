@@ -86,15 +86,22 @@ def main(argv: list[str] | None = None) -> int:
     from .io.logging import setup_logging
     comm = MPI.COMM_WORLD
     log = setup_logging(args.log_level, comm.rank)
+    from .preflight import run_checks
     try:
         case = load_case(args.case, args.set)
+        estimate = run_checks(case, comm, log)       # geometry, memory, time steps (collective)
     except ConfigError as err:
         if comm.rank == 0:
-            print(f"error: {err}", file=sys.stderr)
+            message = str(err)
+            print(f"error: {message if message.startswith(str(args.case)) else f'{args.case}: {message}'}",
+                  file=sys.stderr)
         return EXIT_BAD_INPUT
     if args.validate:
         if comm.rank == 0:
-            print(f"{args.case}: valid ({case.physics} case '{case.name}')")
+            size = "" if estimate is None else (f"; mesh ≈ {estimate.cells:.3g} cells, {estimate.unknowns:.3g} "
+                                                f"unknowns, ≈ {estimate.bytes_per_rank(comm.size) / 1e9:.2g} GB "
+                                                f"per rank on {comm.size}")
+            print(f"{args.case}: valid ({case.physics} case '{case.name}'{size})")
         return 0
     out = args.output or Path(case.output.directory)
     write_resolved_case(case, out, comm.rank)

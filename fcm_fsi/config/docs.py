@@ -54,7 +54,22 @@ def reference_markdown() -> str:
             for sub in _section_types(hints[f.name]):
                 queue.append((f.name if path == "(top level)" else f"{path}.{f.name}", sub))
         lines.append("")
-    return "\n".join(lines)
+    return "\n".join(lines + checks_markdown())
+
+
+def checks_markdown() -> list[str]:
+    """The pre-run checks of ``fcm_fsi.preflight`` (every run and ``--validate``), one line each."""
+    from ..preflight import CHECKS
+    lines = ["## Pre-run checks", "",
+             "Run before anything is built, by every run and by `--validate` (`fcm_fsi/preflight.py`). "
+             "An error stops with exit code 2 and one line naming the key; a warning is logged and the run "
+             "goes on. Every resolution level is validated against the schema; these checks apply to the "
+             "chosen one.", ""]
+    for check in CHECKS:
+        doc = " ".join((check.__doc__ or "").split())
+        lines.append(f"- `{check.__name__}`: {doc}")
+    lines.append("")
+    return lines
 
 
 if __name__ == "__main__":

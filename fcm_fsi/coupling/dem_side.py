@@ -52,14 +52,15 @@ REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # com
 
 
 # ------------------------------------------------------------------ level-set primitives
-def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0) -> Shapes:
+def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0, structure=None) -> Shapes:
     """Level-set primitives of every block of ``build_state(cfg)`` in its body (principal)
     frame: a box block is one solid box of its size [m], sphere and clump blocks are the union
     of their spheres, structure blocks are the boxes lo..hi of the builder (its fixed foundation
     has none: it lies under the ground, the fluid never sees it). The world shape of block b is
     ``pos[b] + R(quat[b]) (offset + rot x_shape)``. Box edges shorter than ``min_thickness``
     [m] are widened to it about the box centre (``coupling.min_thickness``:
-    a wall thinner than a cell would otherwise fall between the mesh nodes and leak)."""
+    a wall thinner than a cell would otherwise fall between the mesh nodes and leak).
+    ``structure``: the built ``dem.structure`` when the caller has it (built here otherwise)."""
     parts, first = [], 0
     for b, count in _described_blocks(cfg):
         blocks = np.arange(first, first + count)
@@ -72,7 +73,8 @@ def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0
         else:
             parts.append(_spheres(state, blocks))
         first += count
-    structure = build_structure(cfg)
+    if structure is None:
+        structure = build_structure(cfg)
     if structure is not None:   # builder blocks: axis-aligned boxes at identity orientation; the
         seen = ~structure.fixed  # foundation lies under the ground: no shape (the fluid never sees it)
         parts.append(_boxes(first + np.flatnonzero(seen),

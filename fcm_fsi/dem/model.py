@@ -158,9 +158,11 @@ def walls_of(cfg: DEMConfig, mats: Materials, ns: int, clip: bool) -> WallContac
                        until=puntil + muntil)
 
 
-def build_system(cfg: DEMConfig, with_ledger: bool = True) -> DEMSystem:
-    """Blocks, contact, walls, controls; refuses dt > dt_safety·Δt_cr (ConfigError)."""
-    structure = build_structure(cfg)
+def build_system(cfg: DEMConfig, with_ledger: bool = True, structure=None) -> DEMSystem:
+    """Blocks, contact, walls, controls; refuses dt > dt_safety·Δt_cr (ConfigError).
+    ``structure``: the built ``dem.structure`` when the caller has it (built here otherwise)."""
+    if structure is None:
+        structure = build_structure(cfg)
     state = build_state(cfg, structure)
     mats = materials_of(cfg)
     skin = cfg.skin if cfg.skin is not None else 0.3 * float(state.sph_radius.min())
