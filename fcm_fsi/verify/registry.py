@@ -92,6 +92,21 @@ def in_interval(key: str, value: float, lo: float, hi: float, unit: str = "-", r
     return Metric(key, _f(value), reference, None, unit, bool(lo <= value <= hi), f"{lo:g} <= value <= {hi:g}")
 
 
+def error_order(key: str, coarse: float, fine: float, reference: float, h_ratio: float, min_order: float,
+                unit: str = "-") -> Metric:
+    """Convergence toward a reference between two meshes whose cell sizes differ by ``h_ratio`` > 1:
+    the observed order p = ln(|e_coarse| / |e_fine|) / ln(h_ratio) of the errors e = value − reference
+    must reach ``min_order`` (0: the fine mesh is closer to the reference at all; 1: at least first
+    order, i.e. the reference lies between the fine value and its first-order Richardson
+    extrapolation). For a coarse level whose error the target tolerance cannot yet bound."""
+    e_c, e_f = abs(coarse - reference), abs(fine - reference)
+    p = math.log(e_c / e_f) / math.log(h_ratio) if e_c > 0 and e_f > 0 else (math.inf if e_f == 0 else -math.inf)
+    passed = p > 0 if min_order == 0 else p >= min_order
+    rel = f"|error| {e_c / abs(reference):.3g} -> {e_f / abs(reference):.3g} (h / {h_ratio:g})"
+    return Metric(key, _f(p), None, _f(min_order), unit, bool(passed),
+                  f"{rel}: observed order {p:.3g} {'> 0' if min_order == 0 else f'>= {min_order:g}'}")
+
+
 def report_only(key: str, value: float, unit: str = "-", reference: float | None = None, note: str = "reported") -> Metric:
     """A number reported with no pass band (always passes; say why in ``note``)."""
     return Metric(key, _f(value), reference, None, unit, True, note)

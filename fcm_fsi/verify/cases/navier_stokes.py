@@ -20,7 +20,8 @@ from ...fluid.forces import ReactionForce, probe
 from ...fluid.navier_stokes import NavierStokes
 from ...io.logging import get_logger
 from ...mesh import channel
-from ..registry import Metric, at_least, at_most, in_interval, rel_error_metric, register, report_only
+from ..registry import (Metric, at_least, at_most, error_order, in_interval, rel_error_metric, register,
+                        report_only)
 
 log = get_logger("verify.navier_stokes")
 
@@ -349,13 +350,16 @@ def cylinder_3d1z_solution(comm, h_cyl: float, h_far: float, petsc: dict,
 
 @register("cylinder_3d1z", "Schäfer–Turek 3D-1Z (Re 20, steady, square channel): drag and pressure drop", issue=3)
 def cylinder_3d1z(level, out_dir: Path, comm) -> list[Metric]:
-    """Quick: one coarse mesh graded from the cylinder over the channel. Full: three meshes with
+    """Quick: two coarse meshes graded from the cylinder over the channel (h_cyl 0.03 and 0.02,
+    7.8k and 24k tetrahedra), far too coarse for the 2 %/3 % targets (c_D +25.5 / +16.3 %, Δp
+    −13.0 / −7.9 %): the check is their convergence toward the reference at no less than first
+    order (the least P1/P1 gives for these functionals; observed 1.10 and 1.23). Full: three meshes with
     a shell of fine cells (h_cyl within 2 h_cyl of the surface, growing to h_far = 0.0225 at
     0.15 m): Δp is two point values of the wall pressure and converges like the wall cell size
     (2D-1 on the same grading: −3.3 / −2.4 / −0.8 % at h_cyl 0.0075 / 0.005 / 0.0025), so the
     cells go where it is decided."""
     from ...fluid.solvers import SCHUR_AMG
-    levels = ([(0.02, 0.06, None)] if level == "quick" else
+    levels = ([(0.03, 0.09, None), (0.02, 0.06, None)] if level == "quick" else
               [(h, 0.0225, (2 * h, 0.15)) for h in (0.01, 0.0075, 0.005)])
     rows = []
     for h_cyl, h_far, band in levels:
@@ -368,6 +372,14 @@ def cylinder_3d1z(level, out_dir: Path, comm) -> list[Metric]:
         for r in rows:
             print(f"  h_cyl {r[0]:<7g} cells {r[4]:>7d}  c_D {r[1]:.5f}  c_L {r[2]:.5f}  dp {r[3]:.5f}  {r[5]:.1f} s")
         plot_cylinder_convergence(rows, ST_3D1Z, ("c_D", "dp"), out_dir / "cylinder_3d1z_convergence.png")
+    if level == "quick":       # coarse meshes: the trend toward the reference, not the targets
+        (h1, cd1, _, dp1, *_), (h2, *_) = rows
+        return [error_order("c_D_order", cd1, c_d, ST_3D1Z["c_D"], h1 / h2, 1.0),
+                error_order("dp_order", dp1, dp, ST_3D1Z["dp"], h1 / h2, 1.0),
+                report_only("c_D", c_d, reference=ST_3D1Z["c_D"], note="h_cyl 0.02: the 2 % target is the full level's"),
+                report_only("dp", dp, reference=ST_3D1Z["dp"], note="h_cyl 0.02: the 3 % target is the full level's"),
+                report_only("c_L", c_l, reference=ST_3D1Z["c_L"], note="no target in issue #3"),
+                report_only("cells", float(ncells), note="finest mesh")]
     return [rel_error_metric("c_D", c_d, ST_3D1Z["c_D"], 0.02),
             rel_error_metric("dp", dp, ST_3D1Z["dp"], 0.03),
             report_only("c_L", c_l, reference=ST_3D1Z["c_L"], note="no target in issue #3"),
