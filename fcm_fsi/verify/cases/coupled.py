@@ -225,7 +225,9 @@ def dam_break_block(level, out_dir: Path, comm) -> list[Metric]:
     interface profile.)
     The block 'moved' when its centre travelled more than its own width, and 'tumbled' when
     it turned by more than 90° (onto another face) at some time; both only in a run that
-    reached t_end."""
+    reached t_end. 'tumbled' is a check of the full level only: on the quick mesh (1 cm cells)
+    the block does not tumble at all (59.6° at most by t = 1.0 s, against 167° on the full
+    level's 5 mm cells), so at the quick level the rotation is reported."""
     data = case_at_level("dam_break_block", level, out_dir, shorter_coarser(0.6, [100, 30]))
     series, wall, failure = run_coupled(data, out_dir, comm)
     blk = data["dem"]["blocks"][0]
@@ -244,7 +246,9 @@ def dam_break_block(level, out_dir: Path, comm) -> list[Metric]:
             # motion after a blow-up is no evidence: moved and tumbled count only for a completed run
             at_least("moved", float(failure is None and travel.max() > blk["size"][0]), 1.0),
             report_only("travel_max", float(travel.max()), unit="m"),
-            at_least("tumbled", float(failure is None and np.abs(theta).max() > 90.0), 1.0),
+            (at_least("tumbled", float(failure is None and np.abs(theta).max() > 90.0), 1.0) if level == "full" else
+             report_only("tumbled", float(failure is None and np.abs(theta).max() > 90.0),
+                         note="full level only: the quick mesh does not resolve the tumble")),
             report_only("rotation_max_deg", float(np.abs(theta).max()), unit="deg"),
             at_most("exchange_error", float(series["exchange_error"].max()), 1e-10),
             report_only("wall_seconds", wall, note=f"{data['mesh']['cells']} cells, t_end {data['run']['t_end']} s")]
