@@ -61,8 +61,3 @@ class TaggedForm:
         cls = type("Form", (fem.FormMetaClass, cpp.fem.Form_float64), {})
         return cls(self._ufcx, self._spaces, self._coefficients, self._constants, self._subdomains,
                    self.mesh, self._module.ffi, self._code)
-
-
-def compile_form(ufl_form: ufl.Form) -> TaggedForm:
-    """``ufl_form`` compiled as a :class:`TaggedForm` (use its ``.form``)."""
-    return TaggedForm(ufl_form)
