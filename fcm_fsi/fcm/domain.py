@@ -224,8 +224,9 @@ class CutDomain:
         a = self.alpha
         self.volume_weight.x.array[self.q_dofs] = (1 - a) * cv + a
         self.surface_weight.x.array[self.q_dofs] = cs
-        self.extension_weight.x.array[self.q_dofs] = np.where(cut_cells(values)[:, None], 1.0 - cv, 0.0)
-        self.cell_tags.values[:] = cell_classes(values[: self.n_owned])
+        classes = cell_classes(values)
+        self.extension_weight.x.array[self.q_dofs] = np.where((classes == CUT_CELL)[:, None], 1.0 - cv, 0.0)
+        self.cell_tags.values[:] = classes[: self.n_owned]
         self.level_set.x.array[self.level_dofs] = level
         self.set_wall_velocity(wall_velocity)
         # a cell belongs to the body owning its deepest vertex

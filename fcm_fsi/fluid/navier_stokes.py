@@ -169,6 +169,12 @@ def tau_expressions(a, rho, mu, h, dt, time_term: bool):
     return tau_supg, tau_cont
 
 
+def quadrature_degree(config: FluidConfig, field_properties: bool) -> int:
+    """Degree of the NS forms' rule: ``config.quadrature_degree``, or automatic: 2, exact for
+    the P1 products with constant ρ, μ; 3 with field (P1) ρ, μ."""
+    return config.quadrature_degree or (3 if field_properties else 2)
+
+
 def cell_size(mesh) -> fem.Function:
     """Representative element length h_e (DG0): diameter of the disc/ball of the cell's area/volume."""
     tdim = mesh.topology.dim
@@ -259,7 +265,7 @@ class NavierStokes:
         g = tuple(config.gravity) + (0.0,) * max(0, gdim - len(config.gravity))
         self.f = fem.Constant(mesh, np.asarray(g[:gdim], dtype=PETSc.ScalarType))
         field_props = isinstance(self.rho, fem.Function) or isinstance(self.mu, fem.Function)
-        q = config.quadrature_degree or (3 if field_props else 2)
+        q = quadrature_degree(config, field_props)
         self.quadrature_degree = q
         self.dx = dx if dx is not None else ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": q})
         self.h = cell_size(mesh)

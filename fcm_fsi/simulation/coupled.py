@@ -58,6 +58,7 @@ from ..fcm.domain import CutDomain, cut_cells
 from ..fcm.hidden import NOT_CUT, HiddenSurface
 from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
 from ..fcm.pockets import PocketVents
+from ..fluid.navier_stokes import quadrature_degree
 from ..fluid.solvers import LinearSolveError
 from ..fluid.tagged_form import TaggedForm
 from ..io.logging import get_logger
@@ -99,7 +100,7 @@ class CoupledModel:
         self.mesh = build_mesh(case.mesh, comm, case_dir, face_distance=block_faces)
         self.gdim = self.mesh.geometry.dim
         # uncut cells: the Navier–Stokes forms' own rule (exact for their polynomial parts)
-        plain_degree = case.fluid.quadrature_degree or (3 if case.phase_field is not None else 2)
+        plain_degree = quadrature_degree(case.fluid, field_properties=case.phase_field is not None)
         self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, wall=cp.wall,
                              extension=cp.cut_extension, slip=cp.wall_slip, plain_degree=plain_degree)
         ns_options = {"dx": self.cut.dx, "extra_terms": [self.cut.penalty_term()]}
