@@ -152,16 +152,25 @@ def test_a_hidden_patch_of_a_box_gets_the_pressure_of_water_at_rest():
 def test_large_hidden_patches_are_solved_by_multigrid_to_the_direct_solution(monkeypatch):
     """Above DIRECT_LIMIT unknowns the graph Laplacian is solved by CG + BoomerAMG: on a 2 × 1 × 3
     box sampled at 2 cm (45,500 hidden of 55,000 samples) it gives the sparse-LU solution to 1e-9
-    relative, for a two-column right-hand side."""
+    relative, for a two-column right-hand side, and again for the next step's conductances and
+    values with the hierarchy kept."""
     import fcm_fsi.fcm.hidden as hidden_module
     x, n, dA = surface_samples(BOX, np.array([1.0, 0.5, 1.5]), np.zeros(3), np.eye(3), 0.02, 3)
     C = radius_conductance(x, 0.02)
     hidden = x[:, 2] < 1.2
     values = np.column_stack([3.0 + 0.1 * x[:, 1] + 0.05 * x[:, 0] ** 2, 1000.0 - x[:, 2]])
-    amg = interpolate_hidden(hidden, values, C)
+    solver = hidden_module.LaplaceSolver()
+    amg = interpolate_hidden(hidden, values, C, solver)
+    # the next step: the same links with other conductances and values (the multigrid
+    # hierarchy kept, the solve started from the last solution)
+    values2 = values * 1.03 + 0.2
+    C2 = C.copy()
+    C2.data *= 1.0 + 0.05 * np.sin(np.arange(C2.nnz))
+    C2 = 0.5 * (C2 + C2.T)
+    amg2 = interpolate_hidden(hidden, values2, C2, solver)
     monkeypatch.setattr(hidden_module, "DIRECT_LIMIT", 10 ** 9)
-    lu = interpolate_hidden(hidden, values, C)
-    np.testing.assert_allclose(amg, lu, rtol=1e-9)
+    np.testing.assert_allclose(amg, interpolate_hidden(hidden, values, C), rtol=1e-9)
+    np.testing.assert_allclose(amg2, interpolate_hidden(hidden, values2, C2), rtol=1e-9)
 
 
 def resting_block(pose: str, refine: int = 1) -> dict:

@@ -15,9 +15,11 @@ wider (3D) than ``spacing``: midpoints, outward normals and lengths or areas
 samples of each primitive that lie outside the others.
 
 Which part is hidden. The fluid does not reach a sample outside the mesh, in cells that are
-all solid (no vertex in the fluid: under the fill, or in a notch of a clump that the P1 level
-set bridges), or in a cut cell whose load goes to another body; such a sample is hidden
-whole. Elsewhere its hidden share is χ, a P1 field that the coupling sets to 1 at every
+all solid (no vertex in the fluid: under the fill or inside another body), or in a cut cell
+whose load goes to another body; such a sample is hidden whole. Near a clump's crease (within
+a cell of another of its primitives) the body's own P1 level set bridges the notch, and the
+cut surface Γ across it carries the notch's load: there solid cells hide a sample only where
+the fill sets a vertex of each of them (a notch under the fill, at the floor). Elsewhere its hidden share is χ, a P1 field that the coupling sets to 1 at every
 vertex of a cut cell in which the fill (or a neighbour) sets the level set and to 0 at the
 other vertices. The cut load on Γ is split the same way: the share χ of it is the fill's (its
 pressure part loads the fill's water, not the body, and the coupling takes it off the
@@ -250,11 +252,29 @@ def body_samples(shapes: Shapes, body: int, spacing: float,
     return x, n, w, radius_conductance(x, spacing)
 
 
-def interpolate_hidden(hidden: np.ndarray, values: np.ndarray, conductance: sp.spmatrix) -> np.ndarray:
+def crease_distance(shapes: Shapes, body: int, x: np.ndarray) -> np.ndarray:
+    """Distance [m] of surface samples ``x`` (body frame) of body ``body`` to its other
+    primitives' surfaces, the smallest over them (∞ for a body of one primitive): near a
+    clump's crease, where the P1 level set bridges the notch between its primitives."""
+    mine = np.flatnonzero(shapes.body == body)
+    if mine.size < 2:
+        return np.full(len(x), np.inf)
+    frame_pos, frame_quat = np.zeros((body + 1, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (body + 1, 1))
+    out = np.full(len(x), np.inf)
+    for k in mine:
+        sub = Shapes(shapes.kind[[k]], shapes.body[[k]], shapes.offset[[k]], shapes.rot[[k]], shapes.half[[k]])
+        d, _ = signed_distance_reference(x, sub, frame_pos, frame_quat, np.inf)
+        on_k = np.abs(d) <= 1e-9 * max(1.0, float(np.abs(x).max(initial=1.0)))
+        out = np.where(on_k, out, np.minimum(out, np.abs(d)))
+    return out
+
+
+def interpolate_hidden(hidden: np.ndarray, values: np.ndarray, conductance: sp.spmatrix,
+                       solver: LaplaceSolver | None = None) -> np.ndarray:
     """``values`` (n,) or (n, k) at every sample: wetted samples keep theirs, hidden ones get
     the harmonic extension of the wetted values over the sample graph of ``conductance``
-    (n, n) (Σ_j c_ij (v_j − v_i) = 0 at each hidden sample). Hidden samples with no path to a
-    wetted one: NaN."""
+    (n, n) (Σ_j c_ij (v_j − v_i) = 0 at each hidden sample), solved by ``solver`` (a fresh
+    :class:`LaplaceSolver` by default). Hidden samples with no path to a wetted one: NaN."""
     out = np.array(values, dtype=float, copy=True)
     H, W = np.flatnonzero(hidden), np.flatnonzero(~np.asarray(hidden, bool))
     if H.size == 0:
@@ -269,48 +289,87 @@ def interpolate_hidden(hidden: np.ndarray, values: np.ndarray, conductance: sp.s
         A, B = A[reached][:, reached], B[reached]
         L = sp.diags(np.asarray(A.sum(axis=1)).ravel() + to_wet[reached]) - A
         rhs = B @ out[W]
-        out[H[reached]] = _solve_laplacian(L.tocsr(), rhs.reshape(len(rhs), -1)).reshape(rhs.shape)
+        solver = LaplaceSolver() if solver is None else solver
+        out[H[reached]] = solver.solve(L.tocsr(), rhs.reshape(len(rhs), -1)).reshape(rhs.shape)
     return out
 
+
+#: a contact link between hidden samples of two bodies stays while they are closer than this ×
+#: the reach that made it
+LINK_HYSTERESIS = 1.1
 
 #: graph Laplacians with more unknowns than this are solved by CG + algebraic multigrid, smaller
 #: ones by sparse LU (whose fill-in makes the 10⁵ hidden samples of a building's joints slow)
 DIRECT_LIMIT = 5000
 
 
-def _solve_laplacian(L: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
-    """L x = rhs for the SPD graph Laplacian ``L`` (Dirichlet rows of the mouths eliminated),
-    one column of ``rhs`` (n, k) at a time; each rank solves the same (replicated) system."""
-    if L.shape[0] <= DIRECT_LIMIT:
-        return np.reshape(spsolve(L.tocsc(), rhs), rhs.shape)
-    from petsc4py import PETSc
-    A = PETSc.Mat().createAIJ(size=L.shape, csr=(L.indptr.astype(PETSc.IntType), L.indices.astype(PETSc.IntType),
-                                                 L.data), comm=PETSc.COMM_SELF)
-    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-    ksp.setOperators(A)
-    ksp.setType("cg")
-    ksp.getPC().setType("hypre")
-    ksp.setTolerances(rtol=1e-12, atol=0.0, max_it=500)
-    x, b = A.createVecs()
-    out = np.empty_like(rhs)
-    for k in range(rhs.shape[1]):
-        b.array[:] = rhs[:, k]
-        ksp.solve(b, x)
-        if ksp.getConvergedReason() <= 0:
-            raise RuntimeError(f"hidden-surface pressure: CG did not converge ({ksp.getConvergedReason()})")
-        out[:, k] = x.array
-    for obj in (ksp, A, x, b):
-        obj.destroy()
-    return out
+class LaplaceSolver:
+    """L x = rhs for the SPD graph Laplacian ``L`` of the hidden samples (Dirichlet rows of the
+    mouths eliminated), one column of ``rhs`` (n, k) at a time; each rank solves the same
+    (replicated) system. Small systems by sparse LU; larger ones by CG + BoomerAMG, whose
+    multigrid hierarchy is kept while the graph's links stay the same (a structure at rest:
+    only the conductances' values and the mouths' pressures change from step to step), each
+    solve starting from the last solution of its column."""
+
+    def __init__(self) -> None:
+        self._pattern = None         # (indptr, indices) of the matrix the hierarchy was built for
+        self._ksp = self._A = None
+        self._last = None            # (n, k) last solutions
+
+    def solve(self, L: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
+        if L.shape[0] <= DIRECT_LIMIT:
+            return np.reshape(spsolve(L.tocsc(), rhs), rhs.shape)
+        from petsc4py import PETSc
+        L = sp.csr_matrix(L)
+        L.sort_indices()
+        same = self._pattern is not None and np.array_equal(self._pattern[0], L.indptr) \
+            and np.array_equal(self._pattern[1], L.indices)
+        if same:
+            self._A.setValuesCSR(L.indptr.astype(PETSc.IntType), L.indices.astype(PETSc.IntType), L.data)
+            self._A.assemble()
+        else:
+            self.destroy()
+            self._A = PETSc.Mat().createAIJ(size=L.shape, csr=(L.indptr.astype(PETSc.IntType),
+                                                               L.indices.astype(PETSc.IntType), L.data),
+                                            comm=PETSc.COMM_SELF)
+            self._ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+            self._ksp.setType("cg")
+            self._ksp.getPC().setType("hypre")
+            self._ksp.setTolerances(rtol=1e-10, atol=0.0, max_it=500)
+            self._pattern = (L.indptr.copy(), L.indices.copy())
+            self._last = None
+        ksp = self._ksp
+        ksp.setOperators(self._A)
+        ksp.getPC().setReusePreconditioner(same)
+        warm = self._last is not None and self._last.shape == rhs.shape
+        ksp.setInitialGuessNonzero(warm)
+        x, b = self._A.createVecs()
+        out = np.empty_like(rhs)
+        for k in range(rhs.shape[1]):
+            b.array[:] = rhs[:, k]
+            x.array[:] = self._last[:, k] if warm else 0.0
+            ksp.solve(b, x)
+            if ksp.getConvergedReason() <= 0:
+                raise RuntimeError(f"hidden-surface pressure: CG did not converge ({ksp.getConvergedReason()})")
+            out[:, k] = x.array
+        x.destroy(), b.destroy()
+        self._last = out.copy()
+        return out
+
+    def destroy(self) -> None:
+        for obj in (self._ksp, self._A):
+            if obj is not None:
+                obj.destroy()
+        self._ksp = self._A = self._pattern = self._last = None
 
 
 def hidden_pressure(hidden: np.ndarray, p: np.ndarray, rho: np.ndarray, gx: np.ndarray,
-                    conductance: sp.spmatrix) -> np.ndarray:
+                    conductance: sp.spmatrix, solver: LaplaceSolver | None = None) -> np.ndarray:
     """Pressure [Pa] at the samples: wetted ones keep ``p``; on the hidden ones the
     piezometric pressure p − ρ g·x and the density ρ are extended from the mouths
     (:func:`interpolate_hidden`) and p = (p − ρ g·x) + ρ g·x at the sample (``gx`` = g·x
     [m²/s²] per sample). Exact for water at rest whatever the path."""
-    both = interpolate_hidden(hidden, np.column_stack([p - rho * gx, rho]), conductance)
+    both = interpolate_hidden(hidden, np.column_stack([p - rho * gx, rho]), conductance, solver)
     return both[:, 0] + both[:, 1] * gx
 
 
@@ -320,7 +379,7 @@ class HiddenSurface:
     the load of :func:`hidden_pressure` on the hidden ones. ``share`` and ``pressure`` are P1
     functions on ``mesh``; 2D meshes sample each body's section z = 0."""
 
-    def __init__(self, mesh, shapes: Shapes, nbodies: int, spacing: float) -> None:
+    def __init__(self, mesh, shapes: Shapes, nbodies: int, spacing: float, bridge: float = 0.0) -> None:
         self.mesh, self.comm, self.nb = mesh, mesh.comm, int(nbodies)
         self.dim = mesh.topology.dim
         self.tree = geometry.BoundingBoxTree(mesh, self.dim)
@@ -334,14 +393,21 @@ class HiddenSurface:
         self.n_body = np.concatenate(n) if n else np.zeros((0, 3))
         self.weight = np.concatenate(w) if w else np.zeros(0)           # [m] 2D, [m²] 3D
         self.body = np.concatenate(body) if body else np.zeros(0, np.int64)
+        # samples within ``bridge`` [m] of a clump's crease: the body's own P1 level set bridges
+        # the notch there, and its cut surface Γ carries the notch's load, so solid cells
+        # round them do not hide them (a hidden notch sample would count that load twice)
+        crease = [crease_distance(shapes, int(b), xb) for b, xb in zip(np.unique(self.body), x)]
+        self.bridged = np.concatenate(crease) < bridge if crease else np.zeros(0, bool)
         self.conductance = sp.block_diag(graphs, format="csr") if graphs else sp.csr_matrix((0, 0))
         self.spacing = float(spacing)
+        self.solver = LaplaceSolver()                # the hidden samples' graph, kept between steps
         self.hidden_measure = np.zeros(self.nb)      # hidden length [m] (2D) or area [m²] (3D) per body, last call
         self.unreached = 0                           # bodies with hidden samples no mouth reaches, last call
         self.last = {}                               # the samples of the last call, for plots
+        self._links = np.zeros(0, np.int64)          # contact links (i n + j, i < j) of the last call
 
     def _values(self, functions, points: np.ndarray, body: np.ndarray, cut_owner: np.ndarray,
-                solid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                solid: np.ndarray, filled: np.ndarray, bridged: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(len(functions), n) values at ``points`` (n, 3) on every rank, NaN outside the
         mesh, and per point whether the fluid does not reach it: outside the mesh, every cell
         containing it solid (``solid``, local cells: no vertex in the fluid), or a cell
@@ -358,10 +424,11 @@ class HiddenSurface:
         point, cell = point[owned], cell[owned]
         foreign = (cut_owner[cell, 0] != NOT_CUT) & (cut_owner[cell, 0] != body[point]) \
             & (cut_owner[cell, 1] != body[point])
-        counts = np.zeros((3, n))
+        counts = np.zeros((4, n))
         counts[0] = np.bincount(point, minlength=n)                      # containing cells
         counts[1] = np.bincount(point[solid[cell]], minlength=n)         # of them solid
         counts[2] = np.bincount(point[foreign], minlength=n)             # of them another body's
+        counts[3] = np.bincount(point[solid[cell] & filled[cell]], minlength=n)   # solid, the fill's
         found, first = np.unique(point, return_index=True)
         local = np.zeros((len(functions), n))
         for j, fn in enumerate(functions):
@@ -372,7 +439,9 @@ class HiddenSurface:
         local = self.comm.allreduce(local, op=MPI.SUM)
         counts = self.comm.allreduce(counts, op=MPI.SUM)
         hit = self.comm.allreduce(hit, op=MPI.SUM)
-        unreached = (counts[0] == 0) | (counts[1] == counts[0]) | (counts[2] > 0)
+        bridged = np.zeros(n, bool) if bridged is None else bridged
+        all_solid = (counts[1] == counts[0]) & (~bridged | (counts[3] == counts[0]))
+        unreached = (counts[0] == 0) | all_solid | (counts[2] > 0)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(hit > 0, local / np.maximum(hit, 1.0), np.nan), unreached
 
@@ -381,19 +450,29 @@ class HiddenSurface:
         spacings (world positions ``xw``): where blocks touch, the water of their joint is one
         film, and a block hidden all round (the lower block of a stack) reaches the mouths of
         the others. Conductance 1/max(distance, spacing/2)² (coincident faces: the same
-        pressure on both)."""
+        pressure on both). A link of the last call stays up to :data:`LINK_HYSTERESIS` × the
+        reach, so that samples at the reach of a structure that only trembles do not change
+        the graph's links from step to step (its multigrid hierarchy is then kept)."""
         idx = np.flatnonzero(hidden)
         n = len(xw)
         if idx.size < 2:
+            self._links = np.zeros(0, np.int64)
             return sp.csr_matrix((n, n))
-        pairs = cKDTree(xw[idx]).query_pairs(GRAPH_REACH * self.spacing, output_type="ndarray")
+        reach = GRAPH_REACH * self.spacing
+        pairs = cKDTree(xw[idx]).query_pairs(LINK_HYSTERESIS * reach, output_type="ndarray")
         i, j = idx[pairs[:, 0]], idx[pairs[:, 1]]
         other = self.body[i] != self.body[j]
-        i, j = i[other], j[other]
-        c = 1.0 / np.maximum(np.sum((xw[i] - xw[j]) ** 2, axis=1), 0.25 * self.spacing ** 2)
+        i, j = np.minimum(i[other], j[other]), np.maximum(i[other], j[other])
+        d2 = np.sum((xw[i] - xw[j]) ** 2, axis=1)
+        key = i * n + j
+        keep = (d2 <= reach * reach) | np.isin(key, self._links)
+        i, j, d2 = i[keep], j[keep], d2[keep]
+        self._links = np.sort(key[keep])
+        c = 1.0 / np.maximum(d2, 0.25 * self.spacing ** 2)
         return symmetric_graph(i, j, c, n)
 
     def load(self, share, pressure, density, gravity: np.ndarray, cut_owner: np.ndarray, solid: np.ndarray,
+             filled: np.ndarray,
              pos: np.ndarray, rot: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
         """Force (nb, 3) [N] and torque about each body's centre (nb, 3) [N m] of
         :func:`hidden_pressure` on the hidden share of the samples: the P1 ``share`` χ ∈ [0, 1]
@@ -414,15 +493,17 @@ class HiddenSurface:
         if self.dim == 2:
             xw[:, 2], nw[:, 2] = 0.0, 0.0
         fns = (share, pressure) + (() if np.isscalar(density) else (density,))
-        vals, whole = self._values(fns, xw, self.body, cut_owner, solid)
+        vals, whole = self._values(fns, xw, self.body, cut_owner, solid, filled, self.bridged)
         rho = np.full(len(xw), float(density)) if np.isscalar(density) else vals[2]
         chi = np.where(whole, 1.0, np.clip(np.nan_to_num(vals[0]), 0.0, 1.0))
-        hidden = chi >= 1.0 - 1e-9
         if not (chi > 0).any():
             return force, torque
-        gx = xw[:, : self.dim] @ np.asarray(gravity, float)[: self.dim]
+        g = np.asarray(gravity, float)[: self.dim]
+        gx = xw[:, : self.dim] @ g
+        p = np.nan_to_num(vals[1])
+        hidden = chi >= 1.0 - 1e-9
         graph = self.conductance + self._contact_conductance(xw, hidden)
-        ph = hidden_pressure(hidden, np.nan_to_num(vals[1]), np.nan_to_num(rho), gx, graph)
+        ph = hidden_pressure(hidden, p, np.nan_to_num(rho), gx, graph, self.solver)
         loaded = (chi > 0) & np.isfinite(ph)
         self.unreached = int(np.unique(self.body[hidden & ~np.isfinite(ph)]).size)
         f = -(np.where(loaded, chi * ph, 0.0) * self.weight * depth)[:, None] * nw     # −χ p n dA per sample

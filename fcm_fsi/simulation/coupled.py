@@ -58,6 +58,7 @@ from ..fcm.domain import CutDomain, cut_cells
 from ..fcm.hidden import NOT_CUT, HiddenSurface
 from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
 from ..fcm.pockets import PocketVents
+from ..fluid.column_pressure import ColumnPressure
 from ..fluid.navier_stokes import quadrature_degree
 from ..fluid.solvers import LinearSolveError
 from ..fluid.tagged_form import TaggedForm
@@ -167,15 +168,17 @@ class CoupledModel:
             try:
                 # every body, fixed ones too: the fill's share of Γ comes off all of them
                 self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb,
-                                            self.h_min * HIDDEN_SPACING[self.gdim])
+                                            self.h_min * HIDDEN_SPACING[self.gdim], bridge=self.h_min)
             except ValueError as err:
                 raise ConfigError(f"{key}: {err}") from None
-            self._static_for_hidden = None
+            self._column = None
             if cp.hidden_pressure == "hydrostatic":
-                self._static_for_hidden = self._hydrostatic_pressure(case)
-                self._static_solved = False
-                self._static_gauged = fem.Function(self.fluid.p_out.function_space, name="p_static_gauged")
-                self._gauge_dofs = self._pin_neighbours(self.fluid.p_out.function_space)
+                g = np.asarray(case.fluid.gravity, float)[: self.gdim]
+                self._column = ColumnPressure(self.mesh, g, self.h_min)
+                self._p_column = fem.Function(self.fluid.p_out.function_space, name="p_column")
+                self._column_of_node = self.cut.node_map(self._p_column.function_space)
+                if self.vents is None:
+                    self._node_flags = fem.Function(self.cut.S1)
             self._rho_node = fem.Function(self.cut.S1, name="rho_node")
             # χ (P1): 1 at every vertex of a cell in which the fill (or a neighbour) sets the
             # level set, 0 elsewhere: the fill's share of Γ (its load is the fill's water's) and
@@ -488,7 +491,9 @@ class CoupledModel:
         if self.hidden is not None:
             # where the fill (or a neighbour) sets the level set: the plain one minus it, > 0
             plain, _ = self._plain_levelset.evaluate(self.points, st.pos, st.quat)
-            self._hidden_share(level, plain - level > self._fill_eps)
+            filled = plain - level > self._fill_eps
+            self._hidden_share(level, filled)
+            self._filled_cell = filled[self.cut.geom_cells].any(axis=1)
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         stats = self.cut.update(level, owner, ubar, share)
@@ -864,21 +869,6 @@ class CoupledModel:
             self.alpha_ang[:] = (w1 - w0) / dt
         return F, fluid_side
 
-    def _hydrostatic_pressure(self, case: Case):
-        """The static pressure Π (fluid/hydrostatic.py) of ``coupling.hidden_pressure:
-        hydrostatic``: the fluid's own when it is well balanced, else one solved for the
-        closure only (its P2 matrix factorised once; one solve per step)."""
-        from ..fluid.hydrostatic import StaticPressure, static_pressure_space
-        own = getattr(self.fluid, "static", None)
-        if own is not None:
-            return own
-        g = np.asarray((tuple(case.fluid.gravity) + (0.0,) * 3)[: self.gdim], float)
-        rho = getattr(self.fluid, "rho", None)
-        if rho is None:
-            rho = fem.Constant(self.mesh, PETSc.ScalarType(case.fluid.density))
-        Pi = fem.Function(static_pressure_space(self.mesh), name="p_static_hidden")
-        return StaticPressure(self.ns, Pi, rho, g)
-
     def _hidden_share(self, level: np.ndarray, filled: np.ndarray) -> None:
         """χ of ``coupling.hidden_pressure`` from the level set at the mesh vertices and where the
         fill sets it (``filled``): 1 at every vertex of a cut cell with such a vertex (assembled
@@ -896,43 +886,24 @@ class CoupledModel:
         chi.x.array[:] = chi.x.array > 0
         chi.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
-    def _pin_neighbours(self, P: fem.FunctionSpace) -> np.ndarray | None:
-        """Owned dofs of the P1 pressure space ``P`` at the mesh vertices that share a cell with
-        the node where the pressure is pinned (a closed domain), the pinned node excluded; None
-        with a natural boundary (no pin)."""
-        if self.comm.allreduce(len(self.ns.bc_set.natural_facets), op=MPI.SUM):
-            return None
-        x = self.mesh.geometry.x[:, : self.gdim]
-        target = np.asarray(self.ns.bc_set.pinned_point)[: self.gdim]
-        tol = 1e-12 * max(1.0, float(np.abs(target).max()))
-        pin = np.flatnonzero(np.linalg.norm(x - target, axis=1) <= tol)
+    def _column_pressure(self):
+        """The local static pressure (fluid/column_pressure.py) for ``hidden_pressure:
+        hydrostatic``: the pressure at the top of the vertical through a node plus the weight of
+        the fluid below it, at the nodes of the cut cells and their neighbours (every cell that
+        holds a surface sample or a share of the fill's surface), the fluid's pressure elsewhere
+        (never used). P1, in the gauge of the fluid's pressure."""
+        out = self._p_column
+        out.x.array[:] = self.fluid.p_out.x.array
         geo = self.cut.geom_cells
-        near = np.unique(geo[np.isin(geo, pin).any(axis=1)]) if pin.size else np.zeros(0, np.int64)
-        dofs = self.cut.node_map(P)[np.setdiff1d(near, pin)]
-        return dofs[dofs < P.dofmap.index_map.size_local]
-
-    def _static_pressure(self):
-        """Π (P1) for ``hidden_pressure: hydrostatic``, in the gauge of the fluid's pressure.
-        With a natural boundary both vanish there. In a closed domain both are pinned to 0 at
-        one node, but the stabilised P1 pressure has a jump at that node (its continuity row is
-        replaced by the pin): away from it the field differs from the pin's value by a constant
-        (−132 Pa in the 3D still-water tank of ``verify buoyancy``). The wetted surface carries
-        that constant, so the hidden surface must too or a resting block is not in balance:
-        Π + the mean of (p − Π) over the pinned node's neighbours. Π itself is solved once for
-        one fluid, each step for a density field (unless it is the fluid's own well-balanced
-        Π, solved in its step)."""
-        static = self._static_for_hidden
-        own = static is getattr(self.fluid, "static", None)
-        if not own and (self.case.phase_field is not None or not self._static_solved):
-            static.update()
-            self._static_solved = True
-        out = self._static_gauged
-        out.interpolate(static.p1)
-        dofs = self._gauge_dofs
-        if dofs is not None:
-            diff = self.comm.allreduce(float(np.sum(self.fluid.p_out.x.array[dofs] - out.x.array[dofs])), op=MPI.SUM)
-            count = self.comm.allreduce(int(dofs.size), op=MPI.SUM)
-            out.x.array[:] += diff / max(count, 1)
+        level = self.cut.level_set.x.array[self.cut.level_dofs]    # at self.points, as last built
+        near = np.zeros(len(self.points), bool)
+        near[geo[level[geo].min(axis=1) < 0]] = True
+        near = self._any_rank(near)
+        near[geo[near[geo].any(axis=1)]] = True                   # and their neighbours
+        near = self._any_rank(near)
+        nodes = np.flatnonzero(near)
+        density = self.case.fluid.density if self.case.phase_field is None else self._rho_node
+        out.x.array[self._column_of_node[nodes]] = self._column.values(self.points[nodes], self.fluid.p_out, density)
         return out
 
     def _hidden_load(self, centres: np.ndarray) -> None:
@@ -942,16 +913,15 @@ class CoupledModel:
         hidden surface (``hidden_force``, ``hidden_torque``) [N, N m] per block; with
         ``hydrostatic`` both from the static pressure Π (:meth:`_static_pressure`) instead of
         the whole pressure."""
-        static = None if self._static_for_hidden is None else self._static_pressure()
-        pressure = self.fluid.p_out if static is None else static      # this step's P1 pressure
         density = self.case.fluid.density
         if self.case.phase_field is not None:
             self._rho_node.x.array[self.cut.level_dofs] = self._node_density()
             density = self._rho_node
+        pressure = self.fluid.p_out if self._column is None else self._column_pressure()   # this step's P1
         st = self.system.state
         g = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
         self.hidden_force, self.hidden_torque = self.hidden.load(
-            self._fill_weight, pressure, density, g, self._cut_owner, self._solid_cell, st.pos,
+            self._fill_weight, pressure, density, g, self._cut_owner, self._solid_cell, self._filled_cell, st.pos,
             st.rotation_matrices(), self.depth)
         force, torque = self.cut.pressure_load(self.nb, centres, pressure, self._fill_weight)
         self.fill_force[:] = 0.0
