@@ -74,7 +74,7 @@ class CouplingConfig:
                                            "plane. With vent_pockets false the fill keeps hiding the underside "
                                            "near the contacts (the lying block at rest: 0.44 N of lift instead of 3.6 N)")
     hidden_pressure: Literal["none", "linear", "hydrostatic"] = param(
-        "none", doc="the parts of a block's surface that the cut fluid does not reach (inside the gap fill where "
+        "hydrostatic", doc="the parts of a block's surface that the cut fluid does not reach (inside the gap fill where "
                     "it lies on the floor, a stopper or another block, or outside the mesh) and what pressure "
                     "they carry. hydrostatic: the local static pressure (the pressure at the top of the vertical "
                     "plus the weight of the fluid below it, fluid/column_pressure.py) extended over them from the "

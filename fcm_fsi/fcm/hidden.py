@@ -14,37 +14,39 @@ wider (3D) than ``spacing``: midpoints, outward normals and lengths or areas
 (:func:`surface_samples`). A body made of several primitives (a clump of spheres) keeps the
 samples of each primitive that lie outside the others.
 
+The split of the load. The body's load is the flow's part on the cut surface Γ (the fluid's
+pressure less the static one, with the viscous traction) plus the static pressure on the
+samples of its true surface: −Σ P n dA over all samples (× ``coupling.depth`` in 2D). The
+coupling takes the static pressure's load on Γ off the body (``CutDomain.pressure_load``) and
+adds this one. The static part therefore does not depend on where Γ runs (through the fill,
+across a clump's notch, chamfering a box's edges): the true surface carries it once.
+
 Which part is hidden. The fluid does not reach a sample outside the mesh, in cells that are
-all solid (no vertex in the fluid: under the fill or inside another body), or in a cut cell
-whose load goes to another body; such a sample is hidden whole. Near a clump's crease (within
-a cell of another of its primitives) the body's own P1 level set bridges the notch, and the
-cut surface Γ across it carries the notch's load: there solid cells hide a sample only where
-the fill sets a vertex of each of them (a notch under the fill, at the floor). Elsewhere its hidden share is χ, a P1 field that the coupling sets to 1 at every
-vertex of a cut cell in which the fill (or a neighbour) sets the level set and to 0 at the
-other vertices. The cut load on Γ is split the same way: the share χ of it is the fill's (its
-pressure part loads the fill's water, not the body, and the coupling takes it off the
-body, ``CutDomain.pressure_load``) and 1 − χ the body's. Where χ < 1 in a cut cell, the level
-set there is the bodies' own, so Γ lies on the body's surface and the wetted share of Γ and
-the hidden share of the samples add up to the whole surface once.
+all solid (no vertex in the fluid: under the fill or inside another body), in a cut cell
+whose load goes to another body, or where the P1 ``share`` χ is 1 (the coupling sets it to 1 at
+every vertex of a cut cell in which the fill or a neighbour sets the level set). Near a clump's
+crease (within a cell of another of its primitives) the body's own P1 level set bridges the
+notch: solid cells there hide a sample only where the fill sets a vertex of each of them (a
+notch under the fill, at the floor). A sample that faces open fluid is not hidden: the point a
+probe distance out along its normal lies in the mesh, in a cell with fluid, outside another
+body's cut and the fill (the side of a wall inside the fill's corner at the floor); it takes
+the static pressure at that point, moved hydrostatically to it.
 
-What pressure. The samples with χ = 1 get the piezometric pressure p − ρ g·x and the density
-ρ of the steady flow through a thin gap of uniform opening from the samples around them, which
-keep their own: the Reynolds equation of such a gap is Laplace's equation on the surface,
-solved here on a graph of the samples (:func:`interpolate_hidden`). On a closed curve (a 2D
-body of one primitive) the graph is the chain of samples and the solution is linear in arc
-length between the two mouths; on a surface, or a 2D clump, it links samples closer than
-:data:`GRAPH_REACH` spacings with conductance 1/distance². Water at rest has one piezometric
-pressure per fluid, which any such interpolation keeps exactly, so a body at rest gets
-Archimedes' lift on any path round a corner. Hidden samples of different bodies that touch
-are linked too: their joint holds one film of water, and the lower block of a stack, hidden
-all round, reaches the mouths of the blocks above it. A hidden patch with no wetted sample around it
-(a body hidden all round) gets no pressure (counted in ``unreached``).
+What pressure on the hidden ones. The piezometric pressure p − ρ g·x and the density ρ of the
+steady flow through a thin gap of uniform opening from the samples around them: the Reynolds
+equation of such a gap is Laplace's equation on the surface, solved here on a graph of the
+samples (:func:`interpolate_hidden`). On a closed curve (a 2D body of one primitive) the graph
+is the chain of samples and the solution is linear in arc length between the two mouths; on a
+surface, or a 2D clump, it links samples closer than :data:`GRAPH_REACH` spacings with
+conductance 1/distance². Water at rest has one piezometric pressure per fluid, which any such
+interpolation keeps exactly, so a body at rest gets Archimedes' lift on any path round a
+corner. Hidden samples of different bodies that touch are linked too: their joint holds one
+film of water, and the lower block of a stack, hidden all round, reaches the mouths of the
+blocks above it. A hidden patch with no wetted sample around it (a body hidden all round) gets
+no pressure (counted in ``unreached``).
 
-The load −Σ χ p n dA (× ``coupling.depth`` in 2D) goes to the body only: its reaction is the
-floor's or the other body's, and the fluid's momentum does not contain it.
-
-For a convex body alone the P1 interpolant of its (convex) signed distance lies above zero
-on its surface, so without a fill or a neighbour no sample is hidden.
+The samples' load goes to the body only: the reaction of its hidden part is the floor's or the
+other body's, and the fluid's momentum does not contain it.
 """
 from __future__ import annotations
 
@@ -379,7 +381,8 @@ class HiddenSurface:
     the load of :func:`hidden_pressure` on the hidden ones. ``share`` and ``pressure`` are P1
     functions on ``mesh``; 2D meshes sample each body's section z = 0."""
 
-    def __init__(self, mesh, shapes: Shapes, nbodies: int, spacing: float, bridge: float = 0.0) -> None:
+    def __init__(self, mesh, shapes: Shapes, nbodies: int, spacing: float, bridge: float = 0.0,
+                 probe: float = 0.0) -> None:
         self.mesh, self.comm, self.nb = mesh, mesh.comm, int(nbodies)
         self.dim = mesh.topology.dim
         self.tree = geometry.BoundingBoxTree(mesh, self.dim)
@@ -401,6 +404,7 @@ class HiddenSurface:
         self.conductance = sp.block_diag(graphs, format="csr") if graphs else sp.csr_matrix((0, 0))
         self.spacing = float(spacing)
         self.solver = LaplaceSolver()                # the hidden samples' graph, kept between steps
+        self.probe = float(probe)                    # [m] how far out a hidden sample looks for open fluid
         self.hidden_measure = np.zeros(self.nb)      # hidden length [m] (2D) or area [m²] (3D) per body, last call
         self.unreached = 0                           # bodies with hidden samples no mouth reaches, last call
         self.last = {}                               # the samples of the last call, for plots
@@ -472,16 +476,18 @@ class HiddenSurface:
         return symmetric_graph(i, j, c, n)
 
     def load(self, share, pressure, density, gravity: np.ndarray, cut_owner: np.ndarray, solid: np.ndarray,
-             filled: np.ndarray,
-             pos: np.ndarray, rot: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
-        """Force (nb, 3) [N] and torque about each body's centre (nb, 3) [N m] of
-        :func:`hidden_pressure` on the hidden share of the samples: the P1 ``share`` χ ∈ [0, 1]
-        (1 where the fill or a neighbour sets the level set), and all of a sample that the
-        fluid does not reach (outside the mesh, in solid cells only, or in a cut cell whose
-        load goes to another body: :meth:`_values`). Samples with χ = 1 take their pressure
-        from the others (:func:`hidden_pressure`), the rest their own. ``density`` is a P1 function
-        [kg/m³] or a number, ``gravity`` (dim,) [m/s²], ``depth`` [m] the 2D span (1 in 3D).
-        Collective; the same on all ranks."""
+             filled: np.ndarray, pos: np.ndarray, rot: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
+        """Force (nb, 3) [N] and torque about each body's centre (nb, 3) [N m] of ``pressure``
+        (the static pressure, a P1 function) on each body's whole surface: the wetted samples
+        take their own, the hidden ones :func:`hidden_pressure` from the wetted ones around
+        them. Hidden: where the P1 ``share`` χ is 1 (the fill or a neighbour sets the level set
+        in a cut cell at it), or where the fluid does not reach at all (outside the mesh, in
+        solid cells only, or in a cut cell whose load goes to another body: :meth:`_values`) —
+        unless the sample faces open fluid: the point ``probe`` [m] out along its normal lies
+        in the mesh, in a cell with fluid, not in another body's cut (the side of a wall inside
+        the fill's corner at the floor, whose water is the open water beside it). ``density``
+        is a P1 function [kg/m³] or a number, ``gravity`` (dim,) [m/s²], ``depth`` [m] the 2D
+        span (1 in 3D). Collective; the same on all ranks."""
         force, torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
         self.hidden_measure[:] = 0.0
         self.unreached = 0
@@ -494,24 +500,35 @@ class HiddenSurface:
             xw[:, 2], nw[:, 2] = 0.0, 0.0
         fns = (share, pressure) + (() if np.isscalar(density) else (density,))
         vals, whole = self._values(fns, xw, self.body, cut_owner, solid, filled, self.bridged)
-        rho = np.full(len(xw), float(density)) if np.isscalar(density) else vals[2]
-        chi = np.where(whole, 1.0, np.clip(np.nan_to_num(vals[0]), 0.0, 1.0))
-        if not (chi > 0).any():
-            return force, torque
+        rho = np.full(len(xw), float(density)) if np.isscalar(density) else np.nan_to_num(vals[2])
+        hidden = whole | (np.nan_to_num(vals[0]) >= 1.0 - 1e-9)
         g = np.asarray(gravity, float)[: self.dim]
         gx = xw[:, : self.dim] @ g
         p = np.nan_to_num(vals[1])
-        hidden = chi >= 1.0 - 1e-9
+        cand = np.flatnonzero(hidden)
+        if self.probe > 0 and cand.size:
+            # a hidden sample that faces open fluid (the point a probe distance out along its
+            # normal is in the mesh, in a cell with fluid, not in another body's cut, not the
+            # fill's: the side of a wall inside the fill's corner at the floor) is wetted, with
+            # the static pressure there moved hydrostatically to it
+            probe = xw[cand] + self.probe * nw[cand]
+            pv, closed = self._values(fns, probe, self.body[cand], cut_owner, solid, filled)
+            facing = ~closed & np.isfinite(pv[1]) & (np.nan_to_num(pv[0]) < 1.0 - 1e-9)
+            idx = cand[facing]
+            rho_probe = np.full(len(cand), float(density)) if np.isscalar(density) else np.nan_to_num(pv[2])
+            p[idx] = pv[1][facing] + rho_probe[facing] * (gx[idx] - probe[facing, : self.dim] @ g)
+            rho[idx] = rho_probe[facing]
+            hidden[idx] = False
         graph = self.conductance + self._contact_conductance(xw, hidden)
-        ph = hidden_pressure(hidden, p, np.nan_to_num(rho), gx, graph, self.solver)
-        loaded = (chi > 0) & np.isfinite(ph)
-        self.unreached = int(np.unique(self.body[hidden & ~np.isfinite(ph)]).size)
-        f = -(np.where(loaded, chi * ph, 0.0) * self.weight * depth)[:, None] * nw     # −χ p n dA per sample
+        ph = hidden_pressure(hidden, p, rho, gx, graph, self.solver)
+        reached = np.isfinite(ph)
+        self.unreached = int(np.unique(self.body[hidden & ~reached]).size)
+        f = -(np.where(reached, ph, 0.0) * self.weight * depth)[:, None] * nw     # −p n dA per sample
         m = np.cross(xw - pos[self.body, :3], f)
         for k in range(3):
             force[:, k] = np.bincount(self.body, weights=f[:, k], minlength=self.nb)
             torque[:, k] = np.bincount(self.body, weights=m[:, k], minlength=self.nb)
-        self.hidden_measure[:] = np.bincount(self.body[loaded], weights=(chi * self.weight)[loaded], minlength=self.nb)
-        self.last = {"x": xw, "n": nw, "w": self.weight, "body": self.body, "hidden": hidden, "share": chi,
+        self.hidden_measure[:] = np.bincount(self.body[hidden], weights=self.weight[hidden], minlength=self.nb)
+        self.last = {"x": xw, "n": nw, "w": self.weight, "body": self.body, "hidden": hidden,
                      "p": vals[1], "p_hidden": ph}
         return force, torque

@@ -132,17 +132,22 @@ class ColumnPressure:
         self._located = (key, pts, point, cells)
         return pts, point, cells
 
-    def values(self, points: np.ndarray, pressure, density) -> np.ndarray:
+    def values(self, points: np.ndarray, pressure, density, level=None, with_density: bool = False):
         """P [Pa] at ``points`` (n, 3) (each rank its own; collective): ``pressure`` the
-        fluid's P1 pressure, ``density`` a Function [kg/m³] or a number."""
+        fluid's P1 pressure, ``density`` a Function [kg/m³] or a number; ``level`` a level set
+        of the solids (a Function, < 0 inside them) or None: the columns' points inside solids
+        are left out of the interpolation across columns where a column in the fluid is
+        there (next to a wall the columns through the wall carry the wall's contents, not the
+        water's weight). ``with_density``: also the density [kg/m³] at the points, interpolated
+        alike."""
         points = np.asarray(points, float).reshape(-1, 3)
-        cell, frac, level = self._columns(points)
-        cols, deepest = self._needed(cell, level)
+        cell, frac, level_of_point = self._columns(points)
+        cols, deepest = self._needed(cell, level_of_point)
         if len(cols) == 0:
-            return np.zeros(len(points))
+            return (np.zeros(len(points)), np.zeros(len(points))) if with_density else np.zeros(len(points))
         nlev = max(int(deepest.max()) + 1, 2)
         pts, point, cells = self._locate(cols, nlev)
-        functions = (pressure,) if np.isscalar(density) else (pressure, density)
+        functions = ((pressure,) if np.isscalar(density) else (pressure, density)) + (() if level is None else (level,))
         local = np.zeros((len(functions) + 1, len(pts)))
         for j, fn in enumerate(functions):
             if point.size:
@@ -155,27 +160,42 @@ class ColumnPressure:
             avg = total[:-1] / np.maximum(hits, 1.0)
         p = avg[0].reshape(len(cols), nlev)
         rho = np.full_like(p, float(density)) if np.isscalar(density) else avg[1].reshape(len(cols), nlev)
+        wet = found if level is None else found & (avg[-1].reshape(len(cols), nlev) >= 0)
         weight = column_integral(np.nan_to_num(rho), found, self.g, self.ds)
         first = np.argmax(found, axis=1)                          # the top of each column in the mesh
         valid = found.any(axis=1)
         rows = np.arange(len(cols))
         column = p[rows, first][:, None] + weight - weight[rows, first][:, None]   # P along each column
-        return self._interpolate(cols, valid, column, cell, frac, level)
+        value = self._interpolate(cols, valid, wet, column, cell, frac, level_of_point)
+        if not with_density:
+            return value
+        return value, self._interpolate(cols, valid, wet, rho, cell, frac, level_of_point)
 
-    def _interpolate(self, cols, valid, column, cell, frac, level) -> np.ndarray:
-        """Linear in the level, (bi)linear across the columns around each point."""
+    def _interpolate(self, cols, valid, wet, column, cell, frac, level) -> np.ndarray:
+        """Linear in the level, (bi)linear across the columns around each point; columns
+        outside the mesh left out, and columns in a solid at the point's level where another
+        is in the fluid (``wet`` per column and level)."""
         k = cell.shape[1]
         n = len(cell)
         lookup = {tuple(c): i for i, c in enumerate(cols.tolist())}
         lev0 = np.minimum(np.floor(level).astype(np.int64), column.shape[1] - 2)
         t = np.clip(level - lev0, 0.0, 1.0)
-        acc, wsum = np.zeros(n), np.zeros(n)
-        for corner in np.array(np.meshgrid(*[[0, 1]] * k, indexing="ij")).reshape(k, -1).T:
+        corners = np.array(np.meshgrid(*[[0, 1]] * k, indexing="ij")).reshape(k, -1).T
+        nearest = np.where(t < 0.5, lev0, lev0 + 1)
+        stencil = []
+        for corner in corners:
             idx = np.array([lookup[tuple(c)] for c in (cell + corner).tolist()], np.int64)
             w = np.prod(np.where(corner[None, :] == 1, frac, 1.0 - frac), axis=1)
             v = (1 - t) * column[idx, lev0] + t * column[idx, lev0 + 1]
             ok = valid[idx] & np.isfinite(v)
-            acc += np.where(ok, w * v, 0.0)
-            wsum += np.where(ok, w, 0.0)
+            stencil.append((w, v, ok, ok & wet[idx, nearest]))
+        any_wet = np.zeros(n, bool)
+        for w, v, ok, ok_wet in stencil:
+            any_wet |= ok_wet & (w > 0)
+        acc, wsum = np.zeros(n), np.zeros(n)
+        for w, v, ok, ok_wet in stencil:
+            use = np.where(any_wet, ok_wet, ok)
+            acc += np.where(use, w * v, 0.0)
+            wsum += np.where(use, w, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(wsum > 0, acc / np.maximum(wsum, 1e-300), np.nan)

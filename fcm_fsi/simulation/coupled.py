@@ -77,6 +77,10 @@ log = get_logger("coupled")
 #: hidden patch's edge is placed to one sample, so its load is off by ≈ p × (perimeter × spacing)
 HIDDEN_SPACING = {2: 1.0 / 16, 3: 1.0 / 4}
 
+#: how far out [× h_min] a hidden sample looks for open fluid (fcm/hidden.py): beyond the gap
+#: fill, whose width is h_min
+HIDDEN_PROBE = 1.5
+
 #: blocks whose pose/velocity/load columns go into series.csv (all blocks: bodies.csv)
 SERIES_BLOCKS = 4
 
@@ -166,9 +170,11 @@ class CoupledModel:
         if cp.hidden_pressure != "none":
             key = f"key 'coupling.hidden_pressure' = {cp.hidden_pressure}"
             try:
-                # every body, fixed ones too: the fill's share of Γ comes off all of them
+                # every body, fixed ones too: the static load on Γ comes off all of them
                 self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb,
-                                            self.h_min * HIDDEN_SPACING[self.gdim], bridge=self.h_min)
+                                            self.h_min * HIDDEN_SPACING[self.gdim], bridge=self.h_min,
+                                            probe=HIDDEN_PROBE * self.h_min)
+                self._unit_weight = fem.Constant(self.mesh, PETSc.ScalarType(1.0))
             except ValueError as err:
                 raise ConfigError(f"{key}: {err}") from None
             self._column = None
@@ -180,9 +186,8 @@ class CoupledModel:
                 if self.vents is None:
                     self._node_flags = fem.Function(self.cut.S1)
             self._rho_node = fem.Function(self.cut.S1, name="rho_node")
-            # χ (P1): 1 at every vertex of a cell in which the fill (or a neighbour) sets the
-            # level set, 0 elsewhere: the fill's share of Γ (its load is the fill's water's) and
-            # the hidden share of the body's surface (_hidden_share)
+            # χ (P1): 1 at every vertex of a cut cell in which the fill (or a neighbour) sets
+            # the level set, 0 elsewhere: where the body's surface samples are hidden (_hidden_share)
             self._fill_eps = 1e-6 * self.h_min   # [m] above round-off of the two level sets' difference
             self._fill_weight = fem.Function(self.cut.S1, name="hidden_share")
             if self._plain_levelset is None:
@@ -872,10 +877,8 @@ class CoupledModel:
     def _hidden_share(self, level: np.ndarray, filled: np.ndarray) -> None:
         """χ of ``coupling.hidden_pressure`` from the level set at the mesh vertices and where the
         fill sets it (``filled``): 1 at every vertex of a cut cell with such a vertex (assembled
-        over the ranks, so that a vertex sees all its cells), P1 between. In a cut cell where
-        χ < 1 somewhere the level set is the bodies' own, so Γ lies on the body's surface there,
-        and the wetted share (1 − χ) of Γ and the hidden share χ of the surface samples add up to
-        the whole surface once."""
+        over the ranks, so that a vertex sees all its cells), P1 between: a surface sample where
+        χ = 1 is hidden (fcm/hidden.py)."""
         geo = self.cut.geom_cells
         cells = geo[cut_cells(level[geo]) & filled[geo].any(axis=1)]
         touched = np.zeros(len(filled))
@@ -899,20 +902,48 @@ class CoupledModel:
         near = np.zeros(len(self.points), bool)
         near[geo[level[geo].min(axis=1) < 0]] = True
         near = self._any_rank(near)
-        near[geo[near[geo].any(axis=1)]] = True                   # and their neighbours
-        near = self._any_rank(near)
+        for _ in range(3):                                        # and three rings round them
+            near[geo[near[geo].any(axis=1)]] = True
+            near = self._any_rank(near)
         nodes = np.flatnonzero(near)
         density = self.case.fluid.density if self.case.phase_field is None else self._rho_node
-        out.x.array[self._column_of_node[nodes]] = self._column.values(self.points[nodes], self.fluid.p_out, density)
+        x = self.points[nodes]
+        y = self._off_the_bodies(x, HIDDEN_PROBE * self.h_min)
+        P, rho = self._column.values(y, self.fluid.p_out, density, self.cut.level_set, with_density=True)
+        g = np.zeros(3)
+        g[: self.gdim] = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
+        moved = P + rho * ((x - y) @ g)                           # hydrostatically back to the node
+        bad = ~np.isfinite(moved)
+        if bad.any():                                             # the offset point left the mesh
+            moved[bad] = self._column.values(x[bad], self.fluid.p_out, density, self.cut.level_set)
+        out.x.array[self._column_of_node[nodes]] = np.nan_to_num(moved)
         return out
 
+    def _off_the_bodies(self, x: np.ndarray, distance: float) -> np.ndarray:
+        """Points ``x`` (n, 3) moved along the gradient of the bodies' level set (no fill) to
+        ``distance`` [m] from the nearest body, where they are closer: the open fluid next to a
+        surface, whose static pressure the nodes of its cut cells take (next to a wall the
+        phase field hugs the wall and the columns through it carry its contents)."""
+        st = self.system.state
+        ls = self._plain_levelset
+        d, _ = ls.evaluate(x, st.pos, st.quat)
+        eps = 1e-3 * self.h_min
+        grad = np.zeros_like(x)
+        for i in range(self.gdim):
+            e = np.zeros(3)
+            e[i] = eps
+            grad[:, i] = (ls.evaluate(x + e, st.pos, st.quat)[0] - ls.evaluate(x - e, st.pos, st.quat)[0]) / (2 * eps)
+        norm = np.linalg.norm(grad, axis=1)
+        n = np.where(norm[:, None] > 0.5, grad / np.maximum(norm, 1e-300)[:, None], 0.0)
+        return x + np.maximum(distance - d, 0.0)[:, None] * n
+
     def _hidden_load(self, centres: np.ndarray) -> None:
-        """``coupling.hidden_pressure`` (fcm/hidden.py), from this step's pressure and cut:
-        the pressure part of the cut load on the fill's surface (``fill_force``, ``fill_torque``:
-        it loads the fill's water, not the block) and the interpolated pressure on the block's
-        hidden surface (``hidden_force``, ``hidden_torque``) [N, N m] per block; with
-        ``hydrostatic`` both from the static pressure Π (:meth:`_static_pressure`) instead of
-        the whole pressure."""
+        """``coupling.hidden_pressure`` (fcm/hidden.py), from this step's pressure and cut: the
+        static pressure's load on the cut surface (``fill_force``, ``fill_torque``, taken off the
+        body) and on the samples of the body's true surface, the hidden ones by the gap's
+        interpolation (``hidden_force``, ``hidden_torque``, added) [N, N m] per block; the
+        static pressure is the local one of :meth:`_column_pressure` (``hydrostatic``) or the
+        whole pressure (``linear``)."""
         density = self.case.fluid.density
         if self.case.phase_field is not None:
             self._rho_node.x.array[self.cut.level_dofs] = self._node_density()
@@ -923,7 +954,7 @@ class CoupledModel:
         self.hidden_force, self.hidden_torque = self.hidden.load(
             self._fill_weight, pressure, density, g, self._cut_owner, self._solid_cell, self._filled_cell, st.pos,
             st.rotation_matrices(), self.depth)
-        force, torque = self.cut.pressure_load(self.nb, centres, pressure, self._fill_weight)
+        force, torque = self.cut.pressure_load(self.nb, centres, pressure, self._unit_weight)
         self.fill_force[:] = 0.0
         self.fill_force[:, : self.gdim] = force * self.depth
         self.fill_torque[:] = torque * self.depth

@@ -11,16 +11,15 @@ clump's overlapping spheres counted once, a stack's inner faces not at all). Pos
 * ``tilted``: the same block turned 20° about a horizontal axis, resting on one edge;
 * ``stack``: two bonded 0.10 × 0.02 blocks, one on the other (the outer shape of ``flat``);
 * ``clump``: two spheres of radius 2 cm, centres 2 cm apart, resting on the floor;
-* ``free``: the ``flat`` block held in mid-water, 6 cm above the floor: nothing is hidden,
-  so its error is the cut geometry's own on the same mesh (reported; the quick level's 3D
-  bound).
+* ``free``: the ``flat`` block held in mid-water, 6 cm above the floor: nothing is hidden
+  (reported: the static part of the load comes from the samples of the true surface, the
+  flow's part from the cut surface Γ, so this is the closure's error without a gap).
 
 Every block is held still by a velocity control (the tilted one would topple), and the load
 is read after four 1 ms steps. 2D: structured triangles of the cell size; 3D: a gmsh box of
-2 cm cells refined to the cell size round the blocks. The full level checks each pose within
-1 % in 2D (2.5 mm cells) and 3D (4 mm cells). The quick level checks 2D within 1 % (5 mm) and,
-in 3D at 7 mm, that the resting blocks' error exceeds the free block's by at most 0.5 % of
-ρ g V (the closure adds no error beyond the cut geometry's, which the full level resolves).
+2 cm cells refined to the cell size round the blocks. Each resting pose's lift within 1 % of
+ρ g V (issue #44): quick 5 mm (2D) and 7 mm (3D), full 2.5 mm and 4 mm; the full level also
+checks the horizontal load within 1 % of ρ g V.
 """
 from __future__ import annotations
 
@@ -50,7 +49,6 @@ POSES = ("flat", "tilted", "stack", "clump", "free")
 LEVELS = {"quick": {2: (0.005, POSES[:4]), 3: (0.007, ("flat", "tilted", "free"))},
           "full": {2: (0.0025, POSES[:4]), 3: (0.004, POSES)}}
 TOL = 0.01                                # Archimedes (issue #44)
-EXCESS_TOL = 0.005                        # quick 3D: resting error − free error, of ρ g V
 
 
 def union_volume(dim: int) -> float:
@@ -169,20 +167,13 @@ def buoyancy(level: str, out: Path, comm: MPI.Comm) -> list[Metric]:
             if pose == "free":
                 metrics.append(report_only(f"lift_rel_error_{tag}", errors[pose], reference=0.0,
                                            note=f"the cut geometry's own error at {cell * 1e3:g} mm cells"))
-            elif level == "full" or dim == 2:
-                metrics.append(rel_error_metric(f"lift_{tag}", up, weight, TOL, unit="N"))
             else:
-                metrics.append(report_only(f"lift_rel_error_{tag}", errors[pose], reference=0.0))
+                metrics.append(rel_error_metric(f"lift_{tag}", up, weight, TOL, unit="N"))
             if level == "full":
                 metrics.append(at_most(f"side_force_{tag}", side / weight, TOL))
             else:
                 metrics.append(report_only(f"side_force_{tag}", side / weight, reference=0.0))
             metrics.append(report_only(f"cells_{dim}d_{pose}", float(cells)))
-        if level == "quick" and dim == 3:
-            for pose in poses:
-                if pose != "free":
-                    metrics.append(at_most(f"excess_error_3d_{pose}", abs(errors[pose]) - abs(errors["free"]),
-                                           EXCESS_TOL))
     if comm.rank == 0:
         _plot(out, table, level)
     return metrics
