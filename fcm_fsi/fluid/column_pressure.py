@@ -62,6 +62,39 @@ def column_integral(rho: np.ndarray, found: np.ndarray, g: float, ds: float) -> 
     return np.concatenate([np.zeros((ncol, 1)), np.cumsum(seg, axis=1)], axis=1)
 
 
+def fill_across(cols: np.ndarray, values: np.ndarray, known: np.ndarray,
+                max_sweeps: int = 1000) -> tuple[np.ndarray, np.ndarray]:
+    """``values`` (ncol, nlev) at the columns of grid indices ``cols`` (ncol, k), the entries not
+    ``known`` replaced, level by level, by the mean of the known values of the neighbouring
+    columns (±1 along each grid axis), sweep after sweep until none is left that a known one
+    reaches. Returns the values and which are now known."""
+    values, known = values.copy(), known.copy()
+    k = cols.shape[1]
+    lookup = {tuple(c): i for i, c in enumerate(cols.tolist())}
+    neighbours = []
+    for axis in range(k):
+        for step in (-1, 1):
+            shifted = cols.copy()
+            shifted[:, axis] += step
+            neighbours.append(np.array([lookup.get(tuple(c), -1) for c in shifted.tolist()], np.int64))
+    for _ in range(max_sweeps):
+        todo = ~known
+        if not todo.any():
+            break
+        total, count = np.zeros(values.shape), np.zeros(values.shape)
+        for nb in neighbours:
+            has = nb >= 0
+            src = np.where(has[:, None], known[np.maximum(nb, 0)], False)
+            total += np.where(src, values[np.maximum(nb, 0)], 0.0)
+            count += src
+        new = todo & (count > 0)
+        if not new.any():
+            break
+        values[new] = total[new] / count[new]
+        known = known | new
+    return values, known
+
+
 class ColumnPressure:
     """P of the module docstring on ``mesh`` for gravity ``gravity`` (dim,) [m/s²], columns
     ``spacing`` [m] apart."""
@@ -166,6 +199,13 @@ class ColumnPressure:
         valid = found.any(axis=1)
         rows = np.arange(len(cols))
         column = p[rows, first][:, None] + weight - weight[rows, first][:, None]   # P along each column
+        if level is not None:
+            # below a solid a column's weight counts the solid's contents: take those levels
+            # from the columns beside it that reach them through fluid only
+            clean = np.cumprod(~found | wet, axis=1).astype(bool) & found
+            column, clean = fill_across(cols, column, clean)
+            rho = np.where(clean | ~found, rho, np.nan)
+            wet = wet & clean
         value = self._interpolate(cols, valid, wet, column, cell, frac, level_of_point)
         if not with_density:
             return value
