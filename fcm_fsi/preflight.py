@@ -4,7 +4,7 @@ needs the geometry of several sections at once, or the machine.
 Every check is a function in :data:`CHECKS` returning :class:`Finding` s; an ``error`` stops the
 run (exit code 2, one line naming the key, the value and what is allowed), a ``warning`` is
 logged and the run goes on. The list with each check's docstring is part of
-docs/case-reference.md (generated). ``python -m fcm_fsi CASE --validate`` runs them all.
+docs/case-reference.md (generated). ``python -m fcm_fsi validate CASE`` runs them all.
 
 Nothing here builds a mesh or a solver: the mesh is estimated from its settings, the blocks'
 geometry comes from the DEM state (numpy only).
@@ -207,7 +207,7 @@ def check_memory(case: Case, ctx: "Context") -> Iterator[Finding]:
                   ("mesh.size", m.size))
     serial = f", gmsh's serial mesh {GMSH_BYTES_PER_CELL * est.cells / 1e9:.3g} GB on rank 0" if gmsh else ""
     if gmsh and GMSH_BYTES_PER_CELL * est.cells > ctx.available:
-        serial += (" — more than this machine has: generate it on a larger one (python -m fcm_fsi.mesh CASE "
+        serial += (" — more than this machine has: generate it on a larger one (python -m fcm_fsi mesh CASE "
                    "--write FILE.msh) and run with mesh.kind gmsh_file")
     yield Finding("error", key, f"= {value}: ≈ {est.cells:.3g} cells, {est.unknowns:.3g} unknowns need ≈ "
                                f"{need / 1e9:.3g} GB on this machine ({est.bytes_per_rank(ctx.ranks) / 1e9:.3g} GB "

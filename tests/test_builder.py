@@ -318,12 +318,13 @@ def test_member_names_follow_the_blocks_and_the_sequence_orders_members_by_first
 
 def test_failure_sequence_cli_reads_a_run_folder_and_the_back_wall_rule(tmp_path, capsys):
     import shutil
-    from fcm_fsi.dem.failure_sequence import MemberFailure, main
+    from fcm_fsi.cli import main
+    from fcm_fsi.dem.failure_sequence import MemberFailure
     from fcm_fsi.verify.cases.tsunami import back_wall_after_front
     shutil.copy(ROOT / "cases" / "tsunami_building.yaml", tmp_path / "case.resolved.yaml")
     (tmp_path / "bond_breaks.csv").write_text("t [s],bond [-],block_a [-],block_b [-]\n"
                                               "1.5,3.0,208.0,16.0\n1.25,7.0,32.0,33.0\n")
-    assert main([str(tmp_path)]) == 0
+    assert main(["failure-sequence", str(tmp_path)]) == 0
     rows = [(ln[:18].strip(), float(ln.split()[-3]), int(ln.split()[-1]))
             for ln in capsys.readouterr().out.splitlines()[1:]]
     # storey 0 lists its 16 column blocks first, then its walls in the case's order (xmin, xmax,
@@ -331,8 +332,8 @@ def test_failure_sequence_cli_reads_a_run_folder_and_the_back_wall_rule(tmp_path
     # 208 the foundation. Ties in time are ordered by name.
     assert rows == [("wall xmax s0", 1.25, 1), ("foundation", 1.5, 1), ("wall xmin s0", 1.5, 1)]
     (tmp_path / "bond_breaks.csv").write_text("t [s],bond [-],block_a [-],block_b [-]\n")
-    assert main([str(tmp_path)]) == 0 and "no bond broke" in capsys.readouterr().out
-    assert main([str(tmp_path / "nowhere")]) == 2 and "case.resolved.yaml" in capsys.readouterr().err
+    assert main(["failure-sequence", str(tmp_path)]) == 0 and "no bond broke" in capsys.readouterr().out
+    assert main(["failure-sequence", str(tmp_path / "nowhere")]) == 2 and "case.resolved.yaml" in capsys.readouterr().err
     seq = lambda *mt: [MemberFailure(m, t, 1, t) for m, t in mt]
     assert back_wall_after_front(seq(("wall xmin s0", 1.0), ("wall xmax s0", 2.0))) == 1.0
     assert back_wall_after_front(seq(("wall xmax s1", 0.5), ("wall xmin s0", 1.0))) == 0.0
@@ -398,15 +399,15 @@ def test_back_wall_peak_traction_reads_the_back_walls_largest_lambda_from_a_chec
     assert back_wall_peak_traction(case, ck, members) == pytest.approx(1.0)
     assert np.isnan(back_wall_peak_traction(case, tmp_path / "none.h5", members))
     # the CLI's per-member table: the same numbers, most loaded first
-    from fcm_fsi.dem.bond_report import main
+    from fcm_fsi.cli import main
     lam[to_foundation[1]], broken[to_foundation[1]] = 0.0, False
     write()
-    assert main([str(ROOT / "cases" / "tsunami_building.yaml"), str(ck), "--top", "1", "--members"]) == 0
+    assert main(["bond-report", str(ROOT / "cases" / "tsunami_building.yaml"), str(ck), "--top", "1", "--members"]) == 0
     out = capsys.readouterr().out.splitlines()
     table = {ln[:16].strip(): float(ln.split()[-1]) for ln in out[out.index("member            largest traction/σ_c") + 1:]}
     assert table["wall xmax s0"] == pytest.approx(float(shape_g(0.2)), abs=1e-3)
     assert list(table.values()) == sorted(table.values(), reverse=True)
-    assert main([str(ROOT / "cases" / "bonded_wall_surge.yaml"), str(ck), "--members"]) == 2
+    assert main(["bond-report", str(ROOT / "cases" / "bonded_wall_surge.yaml"), str(ck), "--members"]) == 2
     assert "error:" in capsys.readouterr().err
     assert np.isnan(member_peak_traction(bonds, lam, broken, members, "wall ymid"))
     with pytest.raises(ConfigError, match="not this case's checkpoint"):

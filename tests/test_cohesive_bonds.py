@@ -175,13 +175,13 @@ def test_block_damage_is_the_fraction_of_a_blocks_bonds_that_broke():
 
 
 def test_bond_report_ranks_points_by_the_largest_traction_they_carried(tmp_path, capsys):
-    """``python -m fcm_fsi.dem.bond_report``: λ_max from a checkpoint → σ/σ_c = 27/4 λ(1−λ)²
+    """``python -m fcm_fsi bond-report``: λ_max from a checkpoint → σ/σ_c = 27/4 λ(1−λ)²
     (capped at the peak 1 once past λ = 1/3; 0 once broken), most loaded first, located on
     the structure as built; a checkpoint of another structure is refused."""
     import h5py
 
     from fcm_fsi.config import load_case
-    from fcm_fsi.dem.bond_report import main
+    from fcm_fsi.cli import main
     from fcm_fsi.dem.cohesive import shape_g
     from fcm_fsi.dem.model import build_system
     case_path = Path(__file__).resolve().parents[1] / "cases" / "bonded_wall_surge.yaml"
@@ -195,7 +195,7 @@ def test_bond_report_ranks_points_by_the_largest_traction_they_carried(tmp_path,
     with h5py.File(ck, "w") as f:
         f["globals/dem_int1__bond_lam_max"] = lam
         f["globals/dem_int1__bond_broken"] = broken
-    assert main([str(case_path), str(ck), "--top", "3"]) == 0
+    assert main(["bond-report", str(case_path), str(ck), "--top", "3"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith(f"{bonds.n_points} bond points, 1 broken, 1 past the peak")
     rows = [line.split() for line in out[2:]]
@@ -205,5 +205,5 @@ def test_bond_report_ranks_points_by_the_largest_traction_they_carried(tmp_path,
     assert [float(v) for v in rows[1][3:6]] == pytest.approx(list(x), abs=0.006)
     with h5py.File(ck, "w") as f:
         f["globals/dem_int1__bond_lam_max"] = np.zeros(bonds.n_points + 1)
-    assert main([str(case_path), str(ck)]) == 2
+    assert main(["bond-report", str(case_path), str(ck)]) == 2
     assert "not this case's checkpoint" in capsys.readouterr().err

@@ -178,7 +178,7 @@ def test_cli_phase_field_without_liquid_names_file_and_key(tmp_path):
 def test_reference_blas_is_detected_from_the_loaded_libraries():
     """The CLI warns on Debian's reference BLAS (MUMPS ≈ 3× slower) unless an optimised BLAS
     is loaded too; the check reads the process's mapped libraries."""
-    from fcm_fsi.__main__ import reference_blas_loaded
+    from fcm_fsi.tools.run import reference_blas_loaded
     ref = "7f00-7f10 r-xp 0 08:01 1 /usr/lib/x86_64-linux-gnu/blas/libblas.so.3.11.0\n"
     openblas = "7f20-7f30 r-xp 0 08:01 2 /usr/lib/x86_64-linux-gnu/openblas-serial/libblas.so.3\n"
     assert reference_blas_loaded(ref)

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from fcm_fsi.__main__ import main
+from fcm_fsi.cli import main
 
 from .conftest import ROOT, run_cli
 

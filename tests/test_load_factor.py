@@ -1,4 +1,4 @@
-"""The pushover tool (``python -m fcm_fsi.dem.load_factor``): a slow load ramp finds a bonded
+"""The pushover tool (``python -m fcm_fsi load-factor``): a slow load ramp finds a bonded
 joint's strength, and the recorded load is read from a run's bodies.csv."""
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import pytest
 from fcm_fsi.config.loader import ConfigError
 from fcm_fsi.dem.builder import assemble
 from fcm_fsi.dem.cohesive import CohesiveLaw
-from fcm_fsi.dem.load_factor import RecordedLoad, ramp_to_first_break, recorded_load
+from fcm_fsi.tools.load_factor import RecordedLoad, ramp_to_first_break, recorded_load
 
 SC, DF = 1.0e7, 0.02
 

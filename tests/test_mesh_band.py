@@ -1,6 +1,6 @@
 """`mesh.structure_band`: cells graded from a size at the blocks' faces (the tsunami's `paper`
 level). The face distance against the level set's NumPy reference, the size law in closed
-form, a gmsh mesh that follows it, the case checks, `python -m fcm_fsi.mesh`, and a coupled
+form, a gmsh mesh that follows it, the case checks, `python -m fcm_fsi mesh`, and a coupled
 run on such a mesh."""
 from __future__ import annotations
 
@@ -123,12 +123,12 @@ def test_band_settings_are_checked():
 
 
 def run_mesh_tool(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fcm_fsi.mesh", *args], cwd=ROOT, env=mpi_env(),
+    return subprocess.run([sys.executable, "-m", "fcm_fsi", "mesh", *args], cwd=ROOT, env=mpi_env(),
                           capture_output=True, text=True, timeout=300)
 
 
 def test_mesh_tool_counts_the_tsunami_band_mesh(tmp_path):
-    """`python -m fcm_fsi.mesh` on the tsunami's paper level coarsened 40 × (0.4 m at the
+    """`python -m fcm_fsi mesh` on the tsunami's paper level coarsened 40 × (0.4 m at the
     faces, 1.2 m elsewhere): counts and sizes printed, the .msh written and readable, and the
     case file's paper level is the band of 0.01 m it describes."""
     paper = load_case(ROOT / "cases" / "tsunami_building.yaml", ["resolution=paper"])
@@ -156,7 +156,7 @@ def first_step(out) -> dict:
 def test_coupled_run_on_a_band_mesh_and_on_its_file(tmp_path):
     """impact_box_3d with a 0.2 m band at its fixed box (0.5 m elsewhere) runs on 2 ranks and
     its log reports the band's smallest cells. The same mesh written by `python -m
-    fcm_fsi.mesh --write` and read back as `mesh.kind: gmsh_file` (the cluster route for the
+    fcm_fsi mesh --write` and read back as `mesh.kind: gmsh_file` (the cluster route for the
     paper level) gives the same first step (dolfinx 0.5.2's read_from_msh once failed on
     every gmsh_file run)."""
     band = ["--set", "mesh.structure_band={size: 0.2, grading: 0.5}"]

@@ -1,4 +1,4 @@
-"""Snapshots of a 3D run (fcm_fsi.io.snapshots): marching tetrahedra against closed-form
+"""Snapshots of a 3D run (``python -m fcm_fsi snapshots``): marching tetrahedra against closed-form
 surfaces, and a render of a synthetic output folder in the dolfinx XDMF/HDF5 layout."""
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ import h5py
 import numpy as np
 from scipy.spatial import Delaunay
 
-from fcm_fsi.io.snapshots import isosurface, main, read_vtp
+from fcm_fsi.cli import main
+from fcm_fsi.tools.snapshots import isosurface, read_vtp
 
 
 def cube_tets(n: int = 6, seed: int = 0):
@@ -57,15 +58,15 @@ def test_render_writes_front_and_back_views(tmp_path):
     (tmp_path / "blocks_00000.vtp").write_text(_vtp(pts, np.array([0.0, 1.0])))
     write_pvd(tmp_path / "blocks.pvd", [(0.5, "blocks_00000.vtp")])
     assert read_vtp(tmp_path / "blocks_00000.vtp")["damage"].tolist() == [0.0, 1.0]
-    assert main([str(tmp_path), "--times", "0.4"]) == 0
+    assert main(["snapshots", str(tmp_path), "--times", "0.4"]) == 0
     assert (tmp_path / "snapshot_t0.4_front.png").stat().st_size > 10_000
     assert (tmp_path / "snapshot_t0.4_back.png").exists()
-    assert main([str(tmp_path), "--times", "0.5", "--png-dir", str(tmp_path / "new" / "pngs")]) == 0   # created
+    assert main(["snapshots", str(tmp_path), "--times", "0.5", "--png-dir", str(tmp_path / "new" / "pngs")]) == 0   # created
     assert (tmp_path / "new" / "pngs" / "snapshot_t0.5_front.png").exists()
     with h5py.File(tmp_path / "fields.h5", "a") as f:
         del f["Mesh/mesh/topology"]
         f["Mesh/mesh/topology"] = tets[:, :3]
-    assert main([str(tmp_path), "--times", "0.4"]) == 2
+    assert main(["snapshots", str(tmp_path), "--times", "0.4"]) == 2
 
 
 def _vtp(points, damage) -> str:

@@ -1,11 +1,12 @@
-"""σ_c identified as in the paper (``python -m fcm_fsi.dem.strength``): a joint's bending
+"""σ_c identified as in the paper (``python -m fcm_fsi strength``): a joint's bending
 strength per σ_c, concrete's flexural strength from fib Model Code 2010, the CLI."""
 import numpy as np
 import pytest
 
 from fcm_fsi.config.loader import ConfigError
 from fcm_fsi.dem.cohesive import CohesiveLaw
-from fcm_fsi.dem.strength import (identify, joint_bending_factor, main, mc2010_flexural_strength,
+from fcm_fsi.cli import main
+from fcm_fsi.dem.strength import (identify, joint_bending_factor, mc2010_flexural_strength,
                                   mc2010_tensile_strength, section_capacity)
 
 from .conftest import ROOT
@@ -66,14 +67,14 @@ def test_identified_sigma_c_gives_the_target_strength():
 
 
 def test_cli_reports_the_identification_and_refuses_a_case_without_bonds(capsys):
-    assert main(["cases/tsunami_building.yaml", "--fck", "30"]) == 0
+    assert main(["strength", "cases/tsunami_building.yaml", "--fck", "30"]) == 0
     out = capsys.readouterr().out              # the case carries the identified σ_c
     assert "identified sigma_c = 2.112e+06 Pa" in out and "1.00 x stronger" in out
-    assert main(["cases/tsunami_building.yaml", "--flexural-strength", "3.625"]) == 0
+    assert main(["strength", "cases/tsunami_building.yaml", "--flexural-strength", "3.625"]) == 0
     assert "1.00 x stronger" in capsys.readouterr().out
-    assert main(["cases/tsunami_building.yaml", "--set", "dem.cohesive.sigma_c=1e7", "--fck", "30"]) == 0
+    assert main(["strength", "cases/tsunami_building.yaml", "--set", "dem.cohesive.sigma_c=1e7", "--fck", "30"]) == 0
     assert "4.74 x stronger" in capsys.readouterr().out       # the paper's σ_c with our joints
-    assert main(["cases/cavity_re100.yaml", "--fck", "30"]) == 2
+    assert main(["strength", "cases/cavity_re100.yaml", "--fck", "30"]) == 2
     err = capsys.readouterr().err
     assert "cases/cavity_re100.yaml" in err and "dem.cohesive" in err
 

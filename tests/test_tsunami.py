@@ -1,7 +1,7 @@
 """The tsunami building case (issue #9) as shipped: its first fluid steps on 2 ranks.
 
 The verification's quick level (1.5 s, ≈ 10 min on 2 ranks) and full level (10 s) are run by
-``python -m fcm_fsi.verify tsunami_building``; this is the CI slice of the same case file: the
+``python -m fcm_fsi verify tsunami_building``; this is the CI slice of the same case file: the
 `coarse` mesh, the founded 208-block building and the case's coupling settings, 0.06 s —
 before the water arrives, so the building must stand still on its foundation.
 """

@@ -188,7 +188,7 @@ def test_still_water_quick_level_passes(tmp_path):
     import json
 
     from .conftest import mpi_env
-    res = subprocess.run([sys.executable, "-m", "fcm_fsi.verify", "still_water", "--level", "quick",
+    res = subprocess.run([sys.executable, "-m", "fcm_fsi", "verify", "still_water", "--level", "quick",
                           "--out", str(tmp_path)], cwd=ROOT, env=mpi_env(), capture_output=True, text=True,
                          timeout=900)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]

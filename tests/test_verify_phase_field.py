@@ -11,7 +11,7 @@ from .conftest import ROOT, mpi_env
 
 
 def run_verify(args: list[str], timeout: float = 900) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fcm_fsi.verify", *args], cwd=ROOT, env=mpi_env(),
+    return subprocess.run([sys.executable, "-m", "fcm_fsi", "verify", *args], cwd=ROOT, env=mpi_env(),
                           capture_output=True, text=True, timeout=timeout)
 
 

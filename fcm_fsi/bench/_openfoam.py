@@ -1,6 +1,6 @@
 """interFoam (OpenFOAM v1912) side of the peer benchmark: the same cases as ours, run by interFoam.
 
-Library, not a benchmark entry (the leading underscore keeps it off ``python -m fcm_fsi.bench``).
+Library, not a benchmark entry (the leading underscore keeps it off ``python -m fcm_fsi bench``).
 interFoam is optional: nothing here is imported by the solver or the tests; callers check
 :func:`interfoam_available`, and a case run without it raises RuntimeError.
 

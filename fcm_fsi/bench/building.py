@@ -1,6 +1,6 @@
 """Benchmark: the paper's building (``builder.PAPER_BUILDING``) collapsing under gravity.
 
-    python -m fcm_fsi.bench building [--t-end 1.0] [--dt 1e-5] [--out DIR] [--mode reversible]
+    python -m fcm_fsi bench building [--t-end 1.0] [--dt 1e-5] [--out DIR] [--mode reversible]
 
 The ground-floor columns and walls (all storey-0 vertical members) are removed at t = 0, so
 the upper storey, still bonded, falls 3.3 m onto a ground plane and breaks. DEM only:
@@ -76,7 +76,7 @@ def render_building(s: Structure, path: Path, title: str) -> None:
 
 
 def run(argv: list[str]) -> int:
-    p = argparse.ArgumentParser(prog="python -m fcm_fsi.bench building", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m fcm_fsi bench building", description=__doc__.split("\n")[0])
     p.add_argument("--t-end", type=float, default=1.0, help="simulated time [s]")
     p.add_argument("--dt", type=float, default=1.0e-5, help="DEM time step [s]")
     p.add_argument("--mode", choices=("reversible", "damage"), default=None, help="override the bond mode")

@@ -1,6 +1,6 @@
 """Benchmark: cost split of one coupled fluid step of ``cases/block_overturn.yaml`` (issue #8).
 
-    mpirun -n 2 python -m fcm_fsi.bench coupling [--cells 128x48 256x96] [--t-end 0.25] [--out DIR]
+    mpirun -n 2 python -m fcm_fsi bench coupling [--cells 128x48 256x96] [--t-end 0.25] [--out DIR]
 
 Runs the case (friction 30°) through the normal time loop from t = 0 to ``--t-end`` at each
 mesh size — by default to 0.25 s, before the bore reaches the block at ≈ 0.3 s, so every
@@ -49,7 +49,7 @@ def run_size(cells: tuple[int, int], t_end: float, out: Path, comm) -> dict:
 
 
 def run(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.bench coupling", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m fcm_fsi bench coupling", description=__doc__.split("\n\n")[0])
     ap.add_argument("--cells", nargs="+", default=["128x48", "256x96"],
                     help="mesh sizes NXxNY (default 128x48 256x96)")
     ap.add_argument("--t-end", type=float, default=0.25, help="simulated time per size [s] (default 0.25)")

@@ -1,7 +1,7 @@
 """Benchmark (not a test): cost of rebuilding the level set and the cut data per fluid step.
 
-    python -m fcm_fsi.bench cut [--sizes 16 32 48] [--bodies 1 27 216] [--reps 5]
-    mpirun -n 2 python -m fcm_fsi.bench cut
+    python -m fcm_fsi bench cut [--sizes 16 32 48] [--bodies 1 27 216] [--reps 5]
+    mpirun -n 2 python -m fcm_fsi bench cut
 
 Case: the unit cube on an n×n×n structured tetrahedral mesh (6n³ cells) holding N boxes
 (edge 0.4/∛N × 0.3/∛N × 0.2/∛N, random orientations, on a lattice, so the cut surface per
@@ -79,7 +79,7 @@ def fluid_step_seconds(tm, cut: CutDomain) -> tuple[float, int]:
 
 
 def run(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.bench cut", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m fcm_fsi bench cut", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[16, 32, 48])
     ap.add_argument("--bodies", type=int, nargs="+", default=[1, 27, 216])

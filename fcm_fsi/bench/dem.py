@@ -1,4 +1,4 @@
-"""DEM throughput benchmark (not a test): ``python -m fcm_fsi.bench dem [--sizes 10000 100000 1000000]
+"""DEM throughput benchmark (not a test): ``python -m fcm_fsi bench dem [--sizes 10000 100000 1000000]
 [--threads 1 2] [--steps 200] [--write-docs]``.
 
 Set-up (reproducible; the same packing can be given to another DEM code):
@@ -100,7 +100,7 @@ def write_docs(rows: list[dict], path: Path) -> None:
     import platform
     best = max((r["sphere_steps_per_s"] for r in rows if r["spheres"] >= 99999), default=0.0)
     goal = ("reached" if best >= 5e6 else f"not reached (best {best:.3g} at 100k)")
-    head = ("## DEM\n\n`NUMBA_NUM_THREADS=2 python -m fcm_fsi.bench dem --write-docs` (fcm_fsi/bench/dem.py; "
+    head = ("## DEM\n\n`NUMBA_NUM_THREADS=2 python -m fcm_fsi bench dem --write-docs` (fcm_fsi/bench/dem.py; "
             "defaults: 10k, 100k and 1M spheres, 1 and 2 threads, 200 steps). Set-up, exactly:\n\n"
             + "\n".join(line[2:] if line.startswith("  ") else line for line in
                         (__doc__.split("Set-up (reproducible; the same packing can be given to another DEM code):")[1]
@@ -119,7 +119,7 @@ def write_docs(rows: list[dict], path: Path) -> None:
 
 
 def run(argv: list[str]) -> int:
-    p = argparse.ArgumentParser(prog="python -m fcm_fsi.bench dem", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m fcm_fsi bench dem", description=__doc__.split("\n")[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[10000, 100000, 1000000])
     p.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     p.add_argument("--steps", type=int, default=200)

@@ -1,7 +1,7 @@
 """Benchmark (not a test): cost of one stabilized Navier–Stokes nonlinear iteration in 3D.
 
-    python -m fcm_fsi.bench navier_stokes --sizes 16 32 64 [--solver schur_gamg|schur|schur_ilu|ilu|asm|hypre|lu] [--no-reuse]
-    mpirun -n 2 python -m fcm_fsi.bench navier_stokes --sizes 16 24 32
+    python -m fcm_fsi bench navier_stokes --sizes 16 32 64 [--solver schur_gamg|schur|schur_ilu|ilu|asm|hypre|lu] [--no-reuse]
+    mpirun -n 2 python -m fcm_fsi bench navier_stokes --sizes 16 24 32
 
 Case: channel flow in the unit cube on an n×n×n structured tetrahedral mesh (6n³ cells),
 parabolic inflow (U = 1) at x = 0, do-nothing outflow at x = 1, no-slip elsewhere,
@@ -116,7 +116,7 @@ def row(r: dict) -> str:
 
 
 def run(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.bench.navier_stokes", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m fcm_fsi bench navier_stokes", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[24, 36, 48])
     ap.add_argument("--solver", choices=sorted(SOLVERS), default="schur_gamg",

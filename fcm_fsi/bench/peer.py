@@ -1,11 +1,11 @@
 """Peer benchmark (not a test): our two-phase step against OpenFOAM's interFoam in one run.
 
-    python -m fcm_fsi.bench peer [--levels quick full] [--np 1] [--repeat 3] [--out bench_peer]
-    python -m fcm_fsi.bench peer --impact 0.23 1.0 --np 2      (3D dam break onto a fixed box)
-    python -m fcm_fsi.bench peer --impact-study 1.0 --np 2      (the same at several sizes in both codes)
+    python -m fcm_fsi bench peer [--levels quick full] [--np 1] [--repeat 3] [--out bench_peer]
+    python -m fcm_fsi bench peer --impact 0.23 1.0 --np 2      (3D dam break onto a fixed box)
+    python -m fcm_fsi bench peer --impact-study 1.0 --np 2      (the same at several sizes in both codes)
 
 Case: Martin & Moyce's dam break (``verify dam_break``): quick = a/8 (48 × 20 cells), full =
-a/20 (120 × 50 cells), to T = 3.47. Ours runs as a user would, ``python -m fcm_fsi.verify
+a/20 (120 × 50 cells), to T = 3.47. Ours runs as a user would, ``python -m fcm_fsi verify
 dam_break --level L --np N`` in a fresh process; interFoam (when on PATH; Debian packages
 ``openfoam`` and ``openfoam-examples``, optional) runs the same tank with the same number of
 cells (quads, one cell thick, slip walls, the laminar damBreak tutorial's numerics). For each:
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..verify.__main__ import mpi_env
+from ..verify.runner import mpi_env
 from ..verify.cases.two_phase import (DAM, best_time_shift, dam_break_cells, dam_break_t_end, front_deviation,
                                       front_scaled)
 from . import _openfoam
@@ -34,7 +34,7 @@ from . import _openfoam
 
 def ours(level: str, ranks: int, out: Path) -> dict:
     """Run ``verify dam_break`` in a fresh process; its wall, steps and front metrics."""
-    cmd = [sys.executable, "-m", "fcm_fsi.verify", "dam_break", "--level", level, "--np", str(ranks),
+    cmd = [sys.executable, "-m", "fcm_fsi", "verify", "dam_break", "--level", level, "--np", str(ranks),
            "--out", str(out)]
     t0 = time.perf_counter()
     subprocess.run(cmd, env=mpi_env(), check=False, stdout=subprocess.DEVNULL)
@@ -71,7 +71,7 @@ def hex_size(cells: int) -> float:
 def impact_ours(size: float, t_end: float, ranks: int, out: Path) -> dict:
     """``cases/impact_box_3d.yaml`` with cells of ``size`` [m] and the fast step, under mpirun;
     wall (process, and the time loop's 'total wall'), steps, tetrahedra and the box's force history."""
-    cmd = ["mpirun", "-n", str(ranks), sys.executable, "-m", "fcm_fsi", str(IMPACT_CASE), "--output", str(out),
+    cmd = ["mpirun", "-n", str(ranks), sys.executable, "-m", "fcm_fsi", "run", str(IMPACT_CASE), "--output", str(out),
            "--log-level", "INFO", "--set", f"mesh.size={size}", "--set", f"run.t_end={t_end}"]
     for item in IMPACT_FAST:
         cmd += ["--set", item]
@@ -203,7 +203,7 @@ def table(rows: list[tuple[str, int, dict, dict | None]]) -> str:
 
 
 def run(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.bench peer", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m fcm_fsi bench peer", description=__doc__.split("\n\n")[0])
     ap.add_argument("--levels", nargs="+", choices=sorted(DAM), default=["quick", "full"])
     ap.add_argument("--np", type=int, nargs="+", default=[1], help="rank counts (each level is run on each)")
     ap.add_argument("--out", type=Path, default=Path("bench_peer"))

@@ -4,17 +4,11 @@ Every bond point keeps the largest opening λ = δ/δ_f it has reached (``lam_ma
 checkpoint's DEM state). Eq 28 turns it into the largest traction the point has carried,
 σ/σ_c = 27/4·λ(1 − λ)², whose peak 1 is at λ = 1/3; the point breaks at λ = 1. The report
 lists the most loaded points with their two blocks and where they sit in the structure as
-built (the blocks' initial poses), and summarises the rest::
-
-    python -m fcm_fsi.dem.bond_report cases/tsunami_building.yaml OUTPUT/checkpoint.h5 --top 10
-    python -m fcm_fsi.dem.bond_report cases/tsunami_building.yaml OUTPUT/checkpoint.h5 --members
-
-``--members`` adds the largest traction per building member (the last row of the run's
-``member_loads.csv``).
+built (the blocks' initial poses), and summarises the rest: ``python -m fcm_fsi bond-report``
+(fcm_fsi/tools/bond_report.py).
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -136,43 +130,6 @@ def summary(loads: list[BondPointLoad]) -> dict[str, float]:
             "share_above_0.1_sigma_c": float(np.mean([p.traction_ratio > 0.1 for p in loads])) if loads else 0.0}
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.dem.bond_report", description=__doc__.split("\n\n")[0])
-    ap.add_argument("case", type=Path)
-    ap.add_argument("checkpoint", type=Path)
-    ap.add_argument("--top", type=int, default=10, help="points to list (default 10)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="the same overrides as the run (only the dem section matters)")
-    ap.add_argument("--members", action="store_true",
-                    help="per building member (dem.structure): the largest traction carried, as member_loads.csv")
-    args = ap.parse_args(argv)
-    try:
-        from ..config import load_case
-        case = load_case(args.case, args.set)
-        system, bonds = bonded_structure_of(case)
-        lam, broken = read_bond_state(args.checkpoint)
-        loads = bond_point_loads(bonds, system.state.pos.copy(), lam, broken)
-        if args.members:
-            from .failure_sequence import block_members
-            peaks = member_peak_tractions(bonds, lam, broken, block_members(case))
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    s = summary(loads)
-    print(f"{int(s['points'])} bond points, {int(s['broken'])} broken, {int(s['past_peak'])} past the peak "
-          f"(λ > 1/3); largest traction carried {s['largest_traction_ratio']:.2f} σ_c; "
-          f"{100 * s['share_above_0.1_sigma_c']:.1f} % of the points above 0.1 σ_c")
-    print("point  bond  blocks      x [m]    y [m]    z [m]   lam_max  traction/σ_c")
-    for p in loads[:args.top]:
-        state = "broken" if p.broken else f"{p.traction_ratio:.3f}"
-        print(f"{p.point:5d} {p.bond:5d} {p.block_a:4d}-{p.block_b:<4d} {p.position[0]:8.2f} {p.position[1]:8.2f} "
-              f"{p.position[2]:8.2f}   {p.lam_max:.4f}   {state}")
-    if args.members:
-        print("member            largest traction/σ_c")
-        for name, v in sorted(peaks.items(), key=lambda kv: -np.nan_to_num(kv[1], nan=-1.0)):
-            print(f"{name:16s}  {v:.3f}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":     # the former name of `python -m fcm_fsi bond-report` (fcm_fsi/tools/bond_report.py)
+    from ..cli import main
+    sys.exit(main(["bond-report", *sys.argv[1:]]))

@@ -1,4 +1,4 @@
-"""Pure-DEM runs: ``python -m fcm_fsi case.yaml`` with only a ``dem`` section calls
+"""Pure-DEM runs: ``python -m fcm_fsi run case.yaml`` with only a ``dem`` section calls
 :func:`run_dem_case`.
 
 Time: the DEM advances in steps of ``dem.dt``; an *outer step* is ``run.dt`` (a whole

@@ -4,9 +4,8 @@ A run with bonded blocks writes ``bond_breaks.csv`` (time, bond, its two blocks 
 that breaks). This module names every block of a ``dem.structure`` building by its member —
 ``wall xmin s0`` is the ground-floor wall on the x-min side (the tsunami's front wall: the
 water comes from −x), ``column s1`` a first-floor column, ``slab s0`` the first floor,
-``foundation`` — and orders the members by the time of their first broken bond::
-
-    python -m fcm_fsi.dem.failure_sequence OUTPUT_DIR      # reads case.resolved.yaml and bond_breaks.csv
+``foundation`` — and orders the members by the time of their first broken bond
+(``python -m fcm_fsi failure-sequence OUTPUT_DIR``, fcm_fsi/tools/failure_sequence.py).
 
 A bond joining two members counts for both (a wall torn off its column fails both). The
 structure's blocks are the last of the case's blocks (before them: ``dem.blocks``, then the
@@ -14,16 +13,13 @@ generators), the foundation last of all.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..config.loader import ConfigError
 from ..config.structure import StructureConfig
-from ..io.csv import read_series
 from .builder import KINDS, building_boxes
 
 
@@ -68,20 +64,6 @@ def failure_sequence(t: np.ndarray, block_a: np.ndarray, block_b: np.ndarray,
     return sorted(out, key=lambda f: (f.first_break, f.member))
 
 
-def read_breaks(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t, block_a, block_b) of a ``bond_breaks.csv`` (empty arrays when no bond broke)."""
-    path = Path(path)
-    if not path.exists():
-        raise ConfigError(f"{path}: not found (a run with bonded blocks writes it)")
-    if len(path.read_text().splitlines()) < 2:      # the header only: read_series needs a row
-        return np.zeros(0), np.zeros(0, int), np.zeros(0, int)
-    col = read_series(path)
-    try:
-        return col["t"], col["block_a"].astype(int), col["block_b"].astype(int)
-    except KeyError as err:
-        raise ConfigError(f"{path}: no column {err} (expected t, bond, block_a, block_b)") from None
-
-
 def block_members(case) -> list[str]:
     """The member of every block of ``case`` (a loaded case with a ``dem.structure``), indexed
     by block number: ``block N`` for the blocks before the structure (``dem.blocks``, then the
@@ -98,30 +80,6 @@ def sequence_of_case(case, t: np.ndarray, block_a: np.ndarray, block_b: np.ndarr
     return failure_sequence(t, block_a, block_b, block_members(case))
 
 
-def sequence_of_run(out_dir: Path) -> list[MemberFailure]:
-    """The failure sequence of the run in ``out_dir`` (its case.resolved.yaml and bond_breaks.csv)."""
-    from ..config import load_case
-    out_dir = Path(out_dir)
-    return sequence_of_case(load_case(out_dir / "case.resolved.yaml"), *read_breaks(out_dir / "bond_breaks.csv"))
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.dem.failure_sequence", description=__doc__.split("\n\n")[0])
-    ap.add_argument("output", type=Path, help="a run's output folder")
-    args = ap.parse_args(argv)
-    try:
-        seq = sequence_of_run(args.output)
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    if not seq:
-        print("no bond broke")
-        return 0
-    print("member            first break [s]  last break [s]  bonds broken")
-    for f in seq:
-        print(f"{f.member:18s} {f.first_break:14.4f} {f.last_break:15.4f} {f.bonds:13d}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":     # the former name of `python -m fcm_fsi failure-sequence` (fcm_fsi/tools/failure_sequence.py)
+    from ..cli import main
+    sys.exit(main(["failure-sequence", *sys.argv[1:]]))

@@ -18,16 +18,13 @@ The span and the section cancel, except through f_fl's size effect. f_fl comes f
 user (a test or a FEM run, as in the paper) or from fib Model Code 2010:
 f_ctm = 0.30 f_ck^(2/3) (eq 5.1-3a, f_ck ≤ 50 MPa), and
 f_ctm = α_fl f_ctm,fl with α_fl = 0.06 h^0.7 / (1 + 0.06 h^0.7), h the depth in mm
-(eq 5.1-8a)::
-
-    python -m fcm_fsi.dem.strength cases/tsunami_building.yaml --fck 30
+(eq 5.1-8a). ``python -m fcm_fsi strength`` (fcm_fsi/tools/strength.py) prints the
+identification for a case file.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -136,40 +133,6 @@ def bond_law(case) -> CohesiveLaw:
     return CohesiveLaw.from_config(case.dem.cohesive)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fcm_fsi.dem.strength",
-                                 description="σ_c identified as in the paper (§4(4)): a column's three-point-bending "
-                                             "peak equal to the concrete's")
-    ap.add_argument("case", type=Path, help="a case with dem.cohesive (and dem.structure for the column depth)")
-    src = ap.add_mutually_exclusive_group(required=True)
-    src.add_argument("--fck", type=float, help="characteristic compressive strength [MPa] (fib MC2010 f_ctm,fl)")
-    src.add_argument("--flexural-strength", type=float, help="the member's flexural strength [MPa] (a test or FEM)")
-    ap.add_argument("--depth", type=float, help="member depth [m] for MC2010's size effect (default: the column's x size)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="case overrides")
-    args = ap.parse_args(argv)
-    from ..config import load_case
-    try:
-        case = load_case(args.case, args.set)
-    except ConfigError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    try:
-        if args.fck is not None:
-            r, depth = identify_concrete(case, args.fck * 1e6, args.depth)
-            source = f"fib MC2010, f_ck {args.fck:g} MPa, depth {depth:g} m"
-        else:
-            r, source = identify(bond_law(case), args.flexural_strength * 1e6), "given"
-    except ConfigError as err:
-        print(f"error: {args.case}: {err}", file=sys.stderr)
-        return 2
-    law = case.dem.cohesive
-    print(f"joint law: sigma_c {r.sigma_c_case:.4g} Pa, delta_f {law.delta_f:g} m, penalty_factor {law.penalty_factor:g}")
-    print(f"joint bending strength M_u = {r.bending_factor:.4f} sigma_c W")
-    print(f"flexural strength of a member with the case's joints: {r.flexural_case / 1e6:.3f} MPa")
-    print(f"concrete flexural strength ({source}): {r.flexural_target / 1e6:.3f} MPa")
-    print(f"identified sigma_c = {r.sigma_c_identified:.4g} Pa  (the case's is {r.strength_ratio:.2f} x stronger)")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":     # the former name of `python -m fcm_fsi strength` (fcm_fsi/tools/strength.py)
+    from ..cli import main
+    sys.exit(main(["strength", *sys.argv[1:]]))

@@ -137,7 +137,7 @@ def _collapse(data: dict, out_dir: Path, comm, sequence_required: bool, breaks_r
         _write_sequence(out_dir / "failure_sequence.csv", sequence)
         _plot(out_dir, series, sub / "member_loads.csv")
         if data["output"]["xdmf"]:      # the full level: the paper's Fig. 18–19 views at 5 and 9 s
-            from ...io.snapshots import render
+            from ...tools.snapshots import render
             for t in SNAPSHOT_TIMES:
                 if t <= series["t"][-1] + 1e-9:
                     render(sub, t, png_dir=out_dir)
