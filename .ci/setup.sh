@@ -2,7 +2,7 @@
 # One-command set-up on Debian 12 (bookworm), run as root (or with sudo):
 #   Debian packages for dolfinx 0.5.2 + PETSc + MPI + Numba, then a virtual environment
 #   .venv made from /usr/bin/python3 with --system-site-packages (so it sees dolfinx),
-#   with fcm_fsi installed in editable mode.
+#   with fcm_fsi installed in editable mode, and the linter ruff (pinned, from PyPI).
 #   libopenblas0-serial replaces the reference BLAS under MUMPS and NumPy (3.2x faster LU,
 #   docs/performance.md); serial because the MPI ranks are the parallelism.
 set -euo pipefail
@@ -20,4 +20,7 @@ if [ ! -x .venv/bin/python ]; then
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
 .venv/bin/python -m pip install -q --no-deps --no-build-isolation -e .
+# ruff (the linter .ci/run runs before the tests) is not a Debian bookworm package: the pinned
+# wheel from PyPI, one static binary with no dependencies.
+.venv/bin/python -m pip install -q "ruff==0.17.6"
 .venv/bin/python -c "import dolfinx, numba, fcm_fsi; print('fcm_fsi set up: dolfinx', dolfinx.__version__, 'numba', numba.__version__)"

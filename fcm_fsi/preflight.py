@@ -12,8 +12,9 @@ geometry comes from the DEM state (numpy only).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Callable, Iterator, Literal
+from typing import Literal
 
 import numpy as np
 
@@ -185,7 +186,7 @@ def block_boxes(case: Case, state, structure) -> tuple[np.ndarray, np.ndarray, n
 
 
 # ------------------------------------------------------------------ the checks
-def check_memory(case: Case, ctx: "Context") -> Iterator[Finding]:
+def check_memory(case: Case, ctx: Context) -> Iterator[Finding]:
     """Mesh size and memory: cells, vertices and unknowns are estimated from the mesh settings
     (structured: exact; gmsh: ∫ 4.7/h³ (3D) or 2.31/h² (2D) over the domain for the target size,
     plus the structure band's graded layer) and the memory per rank from measured runs: 0.3 GB
@@ -216,7 +217,7 @@ def check_memory(case: Case, ctx: "Context") -> Iterator[Finding]:
                                f"a host file; more ranks on one machine do not help) or coarsen the mesh")
 
 
-def check_liquid(case: Case, ctx: "Context") -> Iterator[Finding]:
+def check_liquid(case: Case, ctx: Context) -> Iterator[Finding]:
     """Initial liquid region: phase_field.initial must overlap the mesh (else there is no liquid:
     error) and, in a two-phase case, must not fill all of it (no free surface: warning)."""
     pf, m = case.phase_field, case.mesh
@@ -249,7 +250,7 @@ def check_liquid(case: Case, ctx: "Context") -> Iterator[Finding]:
                       f"the liquid region ({pf.initial.shape}) covers the whole mesh: no free surface")
 
 
-def check_blocks(case: Case, ctx: "Context") -> Iterator[Finding]:
+def check_blocks(case: Case, ctx: Context) -> Iterator[Finding]:
     """Coupled cases: every block the fluid sees (a structure's foundation excepted) must overlap
     the fluid mesh (error: a block wholly outside never meets the fluid and the run would end
     without a word); a free block partly outside is a warning (the fluid acts on the part inside
@@ -278,7 +279,7 @@ def check_blocks(case: Case, ctx: "Context") -> Iterator[Finding]:
                       f"{_fmt(lo[b, :d])}..{_fmt(hi[b, :d])} m); the fluid acts on the parts inside only")
 
 
-def check_walls(case: Case, ctx: "Context") -> Iterator[Finding]:
+def check_walls(case: Case, ctx: Context) -> Iterator[Finding]:
     """DEM blocks must not start inside a plane or box wall: a sphere of a free block overlapping a
     wall by more than 10 % of its radius starts with a contact force K × overlap that throws the
     block (error). Fixed blocks may (a foundation sunk into the ground); walls removed later
@@ -312,7 +313,7 @@ def check_walls(case: Case, ctx: "Context") -> Iterator[Finding]:
                           f"{r[k]:.3g} m; allowed overlap ≤ 10 % of the radius): move the block or the wall")
 
 
-def check_points(case: Case, ctx: "Context") -> Iterator[Finding]:
+def check_points(case: Case, ctx: Context) -> Iterator[Finding]:
     """Points and zones of the fluid inside its mesh: fluid.pressure_reference (where p = 0 is
     pinned) inside the mesh box; every mesh.refine zone and fluid.damping_zones layer overlapping
     the mesh (one wholly outside has no effect at all; error)."""
@@ -342,7 +343,7 @@ def check_points(case: Case, ctx: "Context") -> Iterator[Finding]:
                           f"{mlo[a]:g}..{mhi[a]:g} m along {z.axis}")
 
 
-def check_courant(case: Case, ctx: "Context") -> Iterator[Finding]:
+def check_courant(case: Case, ctx: Context) -> Iterator[Finding]:
     """Courant number of the initial velocities U·Δt/h_min at the first step, in cases with a
     phase field or blocks (Δt = run.dt; the prescribed phase-field velocity, the velocity and
     inflow boundary values without a ramp, the blocks' initial velocities): above 10, the largest
@@ -383,7 +384,7 @@ def check_courant(case: Case, ctx: "Context") -> Iterator[Finding]:
         yield Finding("warning", key, text + ": more than a cell per step")
 
 
-def check_dem_time_step(case: Case, ctx: "Context") -> Iterator[Finding]:
+def check_dem_time_step(case: Case, ctx: Context) -> Iterator[Finding]:
     """DEM time step: dem.dt ≤ dem.dt_safety × Δt_cr, Δt_cr = 2√(m/k)(√(h²+1) − h) of the
     lightest effective contact mass and the stiffest contact (error; dem/model.py)."""
     if case.dem is None or ctx.state is None:
@@ -395,7 +396,7 @@ def check_dem_time_step(case: Case, ctx: "Context") -> Iterator[Finding]:
         yield Finding("error", "", str(err))
 
 
-CHECKS: tuple[Callable[[Case, "Context"], Iterator[Finding]], ...] = (
+CHECKS: tuple[Callable[[Case, Context], Iterator[Finding]], ...] = (
     check_memory, check_liquid, check_blocks, check_walls, check_points, check_courant, check_dem_time_step)
 
 

@@ -161,9 +161,10 @@ def test_the_potential_added_mass_is_the_one_that_destabilises_the_explicit_coup
     the growth; it must match the potential-flow estimate of ``added_mass_model: potential``
     within 10 %, the estimate be ρπR² × depth within 6 % (walls, open top and mesh), and the
     run with the estimate as m̃ (factor 1) reach its end."""
+    import yaml
+
     from .conftest import run_cli
     from .test_coupled import read
-    import yaml
     runs = {}
     for name, factor in (("none", 0.0), ("potential", 1.0)):
         case = tmp_path / f"{name}.yaml"
@@ -196,9 +197,10 @@ def test_coupled_fluid_force_converges_to_the_potential_added_mass(tmp_path):
     6.4 and 12.8: the excess ratio between the meshes is that of first order (1.6–2.6) and
     the first-order extrapolation lies within 5 % of the reference (the finest pair gives
     −3 %: higher-order terms)."""
+    import yaml
+
     from .conftest import run_cli
     from .test_coupled import read
-    import yaml
     R, rho, g = 0.08, 1000.0, 9.81
     V = np.pi * R ** 2 * (4 * R / 3)
     m_eff = {}

@@ -6,8 +6,7 @@ import pytest
 
 from fcm_fsi.config.loader import ConfigError, build
 from fcm_fsi.config.structure import CohesiveConfig, StructureConfig
-from fcm_fsi.dem.builder import (KINDS, PAPER_BUILDING, assemble, build_building,
-                                 load_structure, paper_building)
+from fcm_fsi.dem.builder import KINDS, PAPER_BUILDING, assemble, build_building, load_structure, paper_building
 from fcm_fsi.dem.cohesive import CohesiveLaw
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -162,6 +161,7 @@ def test_assemble_pair_shares_one_face():
 def test_docs_list_every_schema_field():
     """docs/cohesive.md carries the field tables of the three schema classes."""
     import dataclasses
+
     from fcm_fsi.config.structure import OpeningConfig
     text = (ROOT / "docs" / "cohesive.md").read_text()
     for cls, prefix in ((CohesiveConfig, "dem.cohesive"), (StructureConfig, "dem.structure"),
@@ -318,6 +318,7 @@ def test_member_names_follow_the_blocks_and_the_sequence_orders_members_by_first
 
 def test_failure_sequence_cli_reads_a_run_folder_and_the_back_wall_rule(tmp_path, capsys):
     import shutil
+
     from fcm_fsi.cli import main
     from fcm_fsi.dem.failure_sequence import MemberFailure
     from fcm_fsi.verify.cases.tsunami import back_wall_after_front
@@ -334,7 +335,8 @@ def test_failure_sequence_cli_reads_a_run_folder_and_the_back_wall_rule(tmp_path
     (tmp_path / "bond_breaks.csv").write_text("t [s],bond [-],block_a [-],block_b [-]\n")
     assert main(["failure-sequence", str(tmp_path)]) == 0 and "no bond broke" in capsys.readouterr().out
     assert main(["failure-sequence", str(tmp_path / "nowhere")]) == 2 and "case.resolved.yaml" in capsys.readouterr().err
-    seq = lambda *mt: [MemberFailure(m, t, 1, t) for m, t in mt]
+    def seq(*mt):
+        return [MemberFailure(m, t, 1, t) for m, t in mt]
     assert back_wall_after_front(seq(("wall xmin s0", 1.0), ("wall xmax s0", 2.0))) == 1.0
     assert back_wall_after_front(seq(("wall xmax s1", 0.5), ("wall xmin s0", 1.0))) == 0.0
     assert back_wall_after_front(seq(("wall xmin s0", 1.0), ("column s0", 2.0))) == 0.0

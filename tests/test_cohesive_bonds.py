@@ -180,8 +180,8 @@ def test_bond_report_ranks_points_by_the_largest_traction_they_carried(tmp_path,
     the structure as built; a checkpoint of another structure is refused."""
     import h5py
 
-    from fcm_fsi.config import load_case
     from fcm_fsi.cli import main
+    from fcm_fsi.config import load_case
     from fcm_fsi.dem.cohesive import shape_g
     from fcm_fsi.dem.model import build_system
     case_path = Path(__file__).resolve().parents[1] / "cases" / "bonded_wall_surge.yaml"

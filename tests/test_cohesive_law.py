@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from fcm_fsi.dem.cohesive import (point_law_array, shape_g, shape_psi, traction_reference)
+from fcm_fsi.dem.cohesive import point_law_array, shape_g, shape_psi, traction_reference
 
 SC, DF = 1.0e7, 0.02
 K0 = 6.75 * SC / DF

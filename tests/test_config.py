@@ -1,8 +1,6 @@
 """Strict case loading: every kind of bad input gives one clear line, never a traceback."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from fcm_fsi.config import ConfigError, case_from_dict, load_case

@@ -12,8 +12,14 @@ import pytest
 
 from fcm_fsi.config.dem import DEMConfig
 from fcm_fsi.config.loader import build
-from fcm_fsi.coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thickness, fluid_volume_ratio,
-                                       shapes_of_blocks, substep_count)
+from fcm_fsi.coupling.dem_side import (
+    DEMSubcycler,
+    fluid_gyration_ratio,
+    fluid_thickness,
+    fluid_volume_ratio,
+    shapes_of_blocks,
+    substep_count,
+)
 from fcm_fsi.dem.model import build_state, build_structure, build_system
 from fcm_fsi.dem.state import quat_to_matrix_np
 from fcm_fsi.fcm.levelset import BOX, SPHERE

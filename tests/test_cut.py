@@ -34,6 +34,7 @@ def test_parts_add_up(nv, gdim):
 def test_plane_cut_of_unit_cube_mesh_is_exact():
     """A linear level set is represented exactly by P1: volume below the plane and its area are exact."""
     from dolfinx import fem, mesh
+
     from fcm_fsi.fluid.phase_field import p1_cell_geometry
     msh = mesh.create_unit_cube(MPI.COMM_WORLD, 6, 5, 4)
     V = fem.FunctionSpace(msh, ("Lagrange", 1))

@@ -138,7 +138,7 @@ def test_fitted_weights_integrate_quadratics_exactly(gdim):
     checked = 0
     for c in np.flatnonzero((s.min(axis=1) < 0) & (s.max(axis=1) >= 0)):
         f = random_quadratic(rng, gdim, x[c].mean(axis=0), np.linalg.norm(x[c, 1] - x[c, 0]))
-        mono = lambda X: f(np.atleast_2d(X))[:, None]     # noqa: E731
+        mono = lambda X: f(np.atleast_2d(X))[:, None]     # noqa: E731, B023 (used in this pass)
         cuts = np.array([x[c, i] + s[c, i] / (s[c, i] - s[c, j]) * (x[c, j] - x[c, i])
                          for i in range(nv) for j in range(i + 1, nv) if (s[c, i] >= 0) != (s[c, j] >= 0)])
         detJ = abs(np.linalg.det(x[c, 1:] - x[c, 0])) / math.factorial(gdim) / wts.sum()   # |K| / |K̂|

@@ -9,7 +9,6 @@ from fcm_fsi.dem.contact import damping_ratio, restitution_clipped, restitution_
 from fcm_fsi.dem.system import critical_time_step
 from fcm_fsi.verify.cases.dem import _measure_restitution, _slide
 
-
 pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
 

@@ -3,12 +3,20 @@ import numpy as np
 import pytest
 
 from fcm_fsi.dem.bodies import box_template, clump_template, update_sphere_positions
-from fcm_fsi.dem.contact import (HIST, closest_point_triangle, gather_pair_forces, history_held, material_table,
-                                 pair_forces, pair_forces_ref, wall_forces, wall_forces_ref)
+from fcm_fsi.dem.contact import (
+    HIST,
+    closest_point_triangle,
+    gather_pair_forces,
+    history_held,
+    material_table,
+    pair_forces,
+    pair_forces_ref,
+    wall_forces,
+    wall_forces_ref,
+)
 from fcm_fsi.dem.integrate import drift, drift_ref, kick
 from fcm_fsi.dem.neighbours import build_pairs, build_pairs_ref, carry_history, sphere_pair_map
 from fcm_fsi.dem.state import DEMState
-
 
 pytestmark = pytest.mark.usefixtures("one_numba_thread")
 
@@ -173,8 +181,9 @@ def test_material_table_matches_mixing_rules():
 
 
 def test_cos_sin_series_matches_library_to_rounding():
-    from fcm_fsi.dem.integrate import _cos_sin
     import numba as nb
+
+    from fcm_fsi.dem.integrate import _cos_sin
 
     @nb.njit
     def many(a):

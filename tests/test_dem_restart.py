@@ -1,13 +1,12 @@
 """A restarted pure-DEM run continues bit-identically (checkpoint → restart == uninterrupted)."""
 import h5py
-import pytest
 import numpy as np
+import pytest
 from mpi4py import MPI
 
 from fcm_fsi.config.case import case_from_dict
 from fcm_fsi.dem.driver import run_dem_case
 from fcm_fsi.verify.cases.dem import repose_config
-
 
 pytestmark = pytest.mark.usefixtures("one_numba_thread")
 

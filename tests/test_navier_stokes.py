@@ -203,6 +203,7 @@ def test_schur_field_split_matches_direct_solve(name):
 
 def test_fieldsplit_without_fields_is_a_clear_error():
     from petsc4py import PETSc
+
     from fcm_fsi.fluid import solvers
     A = PETSc.Mat().createAIJ([4, 4], comm=MPI.COMM_WORLD)
     A.setUp()
@@ -273,6 +274,7 @@ def test_gmres_breakdown_is_accepted_only_when_the_true_residual_meets_rtol():
     """solvers.check_converged accepts a KSP 'breakdown' only if ‖b − A x‖ ≤ rtol ‖b‖: the helper
     says yes for a solved system and no once the solution is perturbed."""
     from petsc4py import PETSc
+
     from fcm_fsi.fluid.solvers import _true_residual_met
     n = 20
     A = PETSc.Mat().createAIJ([n, n], nnz=3, comm=PETSc.COMM_SELF)

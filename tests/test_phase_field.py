@@ -4,7 +4,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
 from mpi4py import MPI
 
 from fcm_fsi.config import case_from_dict
@@ -63,8 +62,10 @@ def test_advective_cells_stop_a_converging_velocity_from_compressing_phi():
     block), the divergence form ∇·(φu) compresses a uniform φ = 0.8: φ_t = −φ ∇·u, so
     φ → 0.8 e^t at the walls, past 1. Cells flagged ``advective_cells`` transport by u·∇φ
     and keep φ = 0.8 (the coupled model flags the cells at and inside the blocks)."""
+    from dolfinx import fem
+    from dolfinx import mesh as dmesh
     from mpi4py import MPI
-    from dolfinx import fem, mesh as dmesh
+
     from fcm_fsi.config.phase_field import InitialShape, PhaseFieldConfig
     from fcm_fsi.fluid.phase_field import PhaseField
     msh = dmesh.create_unit_square(MPI.COMM_WORLD, 8, 8)
@@ -94,8 +95,10 @@ def test_width_floor_keeps_a_dip_in_coarse_cells_from_deepening():
     sharpening flux compresses the dip like an interface: it deepens and φ overshoots 1 around it
     (the sloshing tank's bulk instability). With ε_K = max(ε, ½ h_K) the cells carry the width and
     the dip stays put; ∫φ is conserved either way."""
+    from dolfinx import fem
+    from dolfinx import mesh as dmesh
     from mpi4py import MPI
-    from dolfinx import fem, mesh as dmesh
+
     from fcm_fsi.config.phase_field import InitialShape, PhaseFieldConfig
     from fcm_fsi.fluid.phase_field import PhaseField
     msh = dmesh.create_unit_square(MPI.COMM_WORLD, 8, 8)

@@ -96,6 +96,7 @@ def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path, c
     SimulationDiverged naming the step, the time and the last good checkpoint — the CLI's
     'run stopped' message — not as a PETSc traceback."""
     from mpi4py import MPI
+
     from fcm_fsi.config.case import load_case
     from fcm_fsi.fluid.solvers import LinearSolveError
     from fcm_fsi.simulation.loop import SimulationDiverged, TimeLoop
@@ -380,6 +381,7 @@ def test_sigterm_ends_the_run_after_its_step_with_a_checkpoint(tmp_path):
     import subprocess
     import sys
     import time
+
     from .conftest import ROOT, mpi_env
     case = tmp_path / "case.yaml"
     data = dict(CASE, run=dict(CASE["run"], t_end=200.0, checkpoint_every=100000, log_every=1000))

@@ -3,11 +3,16 @@ strength per σ_c, concrete's flexural strength from fib Model Code 2010, the CL
 import numpy as np
 import pytest
 
+from fcm_fsi.cli import main
 from fcm_fsi.config.loader import ConfigError
 from fcm_fsi.dem.cohesive import CohesiveLaw
-from fcm_fsi.cli import main
-from fcm_fsi.dem.strength import (identify, joint_bending_factor, mc2010_flexural_strength,
-                                  mc2010_tensile_strength, section_capacity)
+from fcm_fsi.dem.strength import (
+    identify,
+    joint_bending_factor,
+    mc2010_flexural_strength,
+    mc2010_tensile_strength,
+    section_capacity,
+)
 
 from .conftest import ROOT
 

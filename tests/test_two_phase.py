@@ -146,6 +146,7 @@ def checkpoint_field(path, name) -> np.ndarray:
 def test_restart_reproduces_uninterrupted_sloshing(tmp_path):
     """4 steps = 2 steps + restart + 2 steps (φ, u and p), on a moving free surface."""
     import yaml
+
     from .conftest import run_cli, run_half_and_resume
     data = sloshing_case(size=0.1, band=0.02, dt=0.05, t_end=0.2)
     data["run"]["checkpoint_every"] = 2
@@ -203,7 +204,8 @@ def test_mass_defect_term_cancels_the_convective_energy_source():
     from types import SimpleNamespace
 
     import ufl
-    from dolfinx import fem, mesh as dmesh
+    from dolfinx import fem
+    from dolfinx import mesh as dmesh
 
     from fcm_fsi.simulation.two_phase import mass_defect_term
 
@@ -211,7 +213,8 @@ def test_mass_defect_term_cancels_the_convective_energy_source():
     V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
     S = fem.FunctionSpace(msh, ("Lagrange", 1))
     u = fem.Function(V)      # a swirl; its P1 interpolant is zero on the boundary nodes
-    u.interpolate(lambda x: np.vstack([np.sin(np.pi * x[0]) ** 2 * np.sin(2 * np.pi * x[1]) + x[0] * x[1] * (1 - x[0]) * (1 - x[1]),
+    u.interpolate(lambda x: np.vstack([np.sin(np.pi * x[0]) ** 2 * np.sin(2 * np.pi * x[1])
+                                       + x[0] * x[1] * (1 - x[0]) * (1 - x[1]),
                                        -np.sin(2 * np.pi * x[0]) * np.sin(np.pi * x[1]) ** 2]))
     rho = fem.Function(S)    # water below a tilted interface, air above
     rho.interpolate(lambda x: property_map(0.5 + 0.5 * np.tanh((0.55 - x[1] - 0.2 * x[0]) / 0.05), 998.2, 1.204))

@@ -86,7 +86,8 @@ def measure(n_spheres: int, threads: int, steps: int) -> dict:
 
 
 def table(rows: list[dict]) -> str:
-    out = ["| spheres | threads | steps | wall [s] | sphere-steps/s | contact updates/s | pair evals/s | contacts/sphere | list rebuilds | load |",
+    out = ["| spheres | threads | steps | wall [s] | sphere-steps/s | contact updates/s | pair evals/s "
+           "| contacts/sphere | list rebuilds | load |",
            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         out.append(f"| {r['spheres']} | {r['threads']} | {r['steps']} | {r['wall']:.2f} | {r['sphere_steps_per_s']:.3g} | "

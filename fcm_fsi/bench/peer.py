@@ -26,9 +26,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ..verify.cases.two_phase import (
+    DAM,
+    best_time_shift,
+    dam_break_cells,
+    dam_break_t_end,
+    front_deviation,
+    front_scaled,
+)
 from ..verify.runner import mpi_env
-from ..verify.cases.two_phase import (DAM, best_time_shift, dam_break_cells, dam_break_t_end, front_deviation,
-                                      front_scaled)
 from . import _openfoam
 
 
@@ -233,7 +239,8 @@ def run(argv: list[str]) -> int:
         texts = []
         for ranks in args.np:
             a = impact_ours(size, t_end, ranks, args.out / f"ours_impact_np{ranks}")
-            b = impact_interfoam(hex_size(a["cells"]), t_end, ranks, args.out / f"interfoam_impact_np{ranks}") if have_foam else None
+            b = (impact_interfoam(hex_size(a["cells"]), t_end, ranks, args.out / f"interfoam_impact_np{ranks}")
+                 if have_foam else None)
             texts.append(impact_table(size, ranks, a, b))
             print(texts[-1], flush=True)
             np.savetxt(args.out / f"impact_np{ranks}_fcm_fsi.csv", np.c_[a["t"], a["fx"]], delimiter=",",

@@ -33,19 +33,23 @@ class MaterialConfig:
 class BlockConfig:
     """One rigid block: a solid box tiled by surface spheres, one sphere, or a clump."""
 
-    shape: Literal["box", "sphere", "clump"] = param(doc="box: solid box with spheres on its surface (mass from the box); sphere: one sphere; clump: mass from its spheres")
+    shape: Literal["box", "sphere", "clump"] = param(doc="box: solid box with spheres on its surface (mass from the "
+                                                         "box); sphere: one sphere; clump: mass from its spheres")
     material: str = param(doc="material name")
     position: Vec3 = param(unit="m", doc="centre of mass (box, sphere) or origin of the clump's sphere coordinates")
     size: Vec3 | None = param(None, unit="m", doc="box edge lengths (shape box)", gt=0)
     radius: float | None = param(None, unit="m", doc="sphere radius (shape sphere) or surface-sphere radius (shape box)", gt=0)
-    spacing: float | None = param(None, unit="m", doc="largest surface-sphere centre spacing on a box edge (default 2·radius)", gt=0)
-    spheres: tuple[tuple[float, float, float, float], ...] = param((), unit="m", doc="clump spheres as (x, y, z, r) relative to position")
+    spacing: float | None = param(None, unit="m", doc="largest surface-sphere centre spacing on a box edge (default "
+                                                      "2·radius)", gt=0)
+    spheres: tuple[tuple[float, float, float, float], ...] = param((), unit="m", doc="clump spheres as (x, y, z, r) "
+                                                                                     "relative to position")
     axis: Vec3 = param((0.0, 0.0, 1.0), doc="rotation axis of the initial orientation")
     angle: float = param(0.0, unit="deg", doc="initial rotation about axis")
     velocity: Vec3 = param((0.0, 0.0, 0.0), unit="m/s", doc="initial velocity")
     omega: Vec3 = param((0.0, 0.0, 0.0), unit="rad/s", doc="initial angular velocity (world frame)")
     fixed: bool = param(False, doc="block never moves (acts as a wall)")
-    bonded: bool = param(False, doc="bond this box by the cohesive law dem.cohesive to every other bonded box it shares a face with (boxes not rotated, angle 0)")
+    bonded: bool = param(False, doc="bond this box by the cohesive law dem.cohesive to every other bonded box it "
+                                    "shares a face with (boxes not rotated, angle 0)")
 
     def __post_init__(self) -> None:
         if self.shape == "box" and (self.size is None or self.radius is None):
@@ -86,7 +90,8 @@ class GeneratorConfig:
 class WallConfig:
     """A static wall: a half-space, the inside of a box, or a triangulated surface."""
 
-    kind: Literal["plane", "box", "mesh"] = param(doc="plane: half-space; box: closed container (its 6 inner faces); mesh: triangles")
+    kind: Literal["plane", "box", "mesh"] = param(doc="plane: half-space; box: closed container (its 6 inner faces); "
+                                                      "mesh: triangles")
     material: str = param(doc="material name")
     point: Vec3 = param((0.0, 0.0, 0.0), unit="m", doc="a point on the plane (kind plane)")
     normal: Vec3 = param((0.0, 0.0, 1.0), doc="plane normal pointing into the domain (kind plane)")
@@ -134,9 +139,12 @@ class DEMConfig:
     generators: tuple[GeneratorConfig, ...] = param((), doc="generated blocks (appended after blocks)")
     walls: tuple[WallConfig, ...] = param((), doc="static walls")
     controls: tuple[ControlConfig, ...] = param((), doc="controlled blocks")
-    structure: StructureConfig | None = param(None, doc="a bonded-block building from the structure builder (its blocks follow blocks and generators)")
-    cohesive: CohesiveConfig | None = param(None, doc="cohesive law of the bonds between the structure's blocks and between bonded blocks (required with either)")
-    ledger_every: int = param(100, unit="steps", doc="energy-ledger and force–displacement CSV row every this many DEM steps", ge=1)
+    structure: StructureConfig | None = param(None, doc="a bonded-block building from the structure builder (its "
+                                                        "blocks follow blocks and generators)")
+    cohesive: CohesiveConfig | None = param(None, doc="cohesive law of the bonds between the structure's blocks and "
+                                                      "between bonded blocks (required with either)")
+    ledger_every: int = param(100, unit="steps", doc="energy-ledger and force–displacement CSV row every this many "
+                                                     "DEM steps", ge=1)
 
     def __post_init__(self) -> None:
         names = [m.name for m in self.materials]

@@ -36,7 +36,15 @@ class StructureBand:
 class MeshConfig:
     """Structured rectangle/box meshes from dolfinx, or gmsh meshes (generated and cached, or a file)."""
 
-    kind: Literal["rectangle", "box", "gmsh_box", "gmsh_disk", "gmsh_file"] = param(doc="rectangle/box: structured simplices; gmsh_box: unstructured gmsh box/rectangle with refine zones; gmsh_disk: unstructured disk (2D) of `radius` centred in lower..upper; gmsh_file: a .msh file")
+    kind: Literal["rectangle", "box", "gmsh_box", "gmsh_disk", "gmsh_file"] = param(doc="rectangle/box: structured "
+                                                                                        "simplices; gmsh_box: "
+                                                                                        "unstructured gmsh "
+                                                                                        "box/rectangle with refine "
+                                                                                        "zones; gmsh_disk: "
+                                                                                        "unstructured disk (2D) of "
+                                                                                        "`radius` centred in "
+                                                                                        "lower..upper; gmsh_file: a "
+                                                                                        ".msh file")
     lower: tuple[float, ...] = param((0.0, 0.0), unit="m", doc="lower corner of the domain (2 or 3 numbers)")
     upper: tuple[float, ...] = param((1.0, 1.0), unit="m", doc="upper corner of the domain (2 or 3 numbers)")
     cells: tuple[int, ...] = param((32, 32), doc="cells per direction for rectangle/box", ge=1)
@@ -52,7 +60,8 @@ class MeshConfig:
         if len(self.lower) not in (2, 3) or len(self.upper) != len(self.lower):
             raise ConfigError("key 'mesh.lower'/'mesh.upper' must both have 2 (2D) or 3 (3D) entries")
         if any(u <= l for l, u in zip(self.lower, self.upper)):
-            raise ConfigError(f"key 'mesh.upper' = {list(self.upper)} must exceed mesh.lower = {list(self.lower)} in every direction")
+            raise ConfigError(f"key 'mesh.upper' = {list(self.upper)} must exceed mesh.lower = {list(self.lower)} "
+                              "in every direction")
         if self.kind in ("rectangle", "box") and len(self.cells) != len(self.lower):
             raise ConfigError(f"key 'mesh.cells' must have {len(self.lower)} entries, one per direction")
         if self.kind == "gmsh_disk" and self.dim != 2:

@@ -5,7 +5,6 @@ from dataclasses import dataclass
 from typing import Literal
 
 from .fields import param
-from .loader import ConfigError
 from .petsc import check_petsc_options
 
 
@@ -48,8 +47,10 @@ class PhaseFieldConfig:
     form: Literal["conservative", "nonconservative"] = param(
         "conservative", doc="conservative Allen–Cahn (eq 11) or the classical Allen–Cahn, for comparison")
     width_factor: float = param(0.6, doc="interface width ε = width_factor · h_min (h_min: smallest cell size)", gt=0, le=10)
-    mobility_factor: float = param(1.0, doc="γ = mobility_factor · U, U = max |u| of the prescribed field (or reference_velocity)", ge=0, le=100)
-    reference_velocity: float | None = param(None, unit="m/s", doc="velocity scale U for γ when the velocity is not prescribed", gt=0)
+    mobility_factor: float = param(1.0, doc="γ = mobility_factor · U, U = max |u| of the prescribed field (or "
+                                            "reference_velocity)", ge=0, le=100)
+    reference_velocity: float | None = param(None, unit="m/s", doc="velocity scale U for γ when the velocity is not "
+                                                                   "prescribed", gt=0)
     mobility_length: float | None = param(
         None, unit="m", gt=0,
         doc="if set, γ = mobility_factor · U · min(1, h_min/mobility_length): the mobility falls in proportion to "
@@ -68,7 +69,8 @@ class PhaseFieldConfig:
                                                "(second order, no iteration and no change test)", ge=1, le=100)
     volume_correction: bool = param(False, doc="shift the interface by L_err = V_err/A every step (eqs 16–17)")
     initial: InitialShape = param(doc="initial liquid region")
-    velocity: PrescribedVelocity | None = param(None, doc="prescribed advecting velocity; omit when the fluid section provides it")
+    velocity: PrescribedVelocity | None = param(None, doc="prescribed advecting velocity; omit when the fluid "
+                                                          "section provides it")
     petsc: dict = param(default_factory=lambda: {"ksp_type": "gmres", "pc_type": "bjacobi", "sub_pc_type": "ilu",
                                                  "ksp_rtol": 1e-12, "ksp_atol": 1e-15},
                         doc="PETSc options of the φ solve (prefix pf_); the default GMRES + block-Jacobi/ILU "

@@ -13,7 +13,8 @@ class RunConfig:
 
     t_end: float = param(unit="s", doc="simulated end time", gt=0)
     dt: float = param(unit="s", doc="(initial) time step of the outer (fluid or phase-field) loop", gt=0)
-    cfl: float | None = param(None, doc="if set, adapt dt each step so that max|u|·dt/h stays at this Courant number", gt=0, le=10)
+    cfl: float | None = param(None, doc="if set, adapt dt each step so that max|u|·dt/h stays at this Courant number",
+                              gt=0, le=10)
     cfl_gas: float | None = param(None, doc="with cfl and a phase field: the Courant number allowed at the gas nodes "
                                   "(φ < 0.05); the liquid and the interface keep run.cfl (default: run.cfl everywhere). "
                                   "Not for blocks that land in contact: the larger steps let the explicit coupling's force "

@@ -21,10 +21,15 @@ class CohesiveConfig:
 
     sigma_c: float = param(unit="Pa", doc="peak normal traction σ_c of eq 28", gt=0)
     delta_f: float = param(unit="m", doc="normal opening δ_f at complete failure (peak at δ_f/3)", gt=0)
-    delta_tc: float | None = param(None, unit="m", doc="tangential opening that counts as δ_f in the mixed-mode opening λ = √((δn/δ_f)² + (δt/δ_tc)²); null = δ_f", gt=0)
-    mode: Literal["reversible", "damage"] = param("reversible", doc="unloading: 'reversible' along eq 28 (the paper), 'damage' along the secant to the origin from the largest λ reached")
-    penalty_factor: float = param(1.0, doc="compression penalty stiffness / initial stiffness 27/4·σ_c/δ_f (1 = same slope on both sides of δ = 0)", gt=0, le=1000)
-    points_per_edge: int = param(2, doc="Gauss points per face edge; a face carries points_per_edge² integration points", ge=1, le=8)
+    delta_tc: float | None = param(None, unit="m", doc="tangential opening that counts as δ_f in the mixed-mode "
+                                                       "opening λ = √((δn/δ_f)² + (δt/δ_tc)²); null = δ_f", gt=0)
+    mode: Literal["reversible", "damage"] = param("reversible", doc="unloading: 'reversible' along eq 28 (the "
+                                                                    "paper), 'damage' along the secant to the origin "
+                                                                    "from the largest λ reached")
+    penalty_factor: float = param(1.0, doc="compression penalty stiffness / initial stiffness 27/4·σ_c/δ_f (1 = same "
+                                           "slope on both sides of δ = 0)", gt=0, le=1000)
+    points_per_edge: int = param(2, doc="Gauss points per face edge; a face carries points_per_edge² integration "
+                                        "points", ge=1, le=8)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -49,7 +54,8 @@ class StructureConfig:
     ``sphere_radius`` on its surface only; every pair of blocks sharing a face is bonded.
     """
 
-    origin: tuple[float, float, float] = param((0.0, 0.0, 0.0), unit="m", doc="position of the first column's grid point at ground level")
+    origin: tuple[float, float, float] = param((0.0, 0.0, 0.0), unit="m", doc="position of the first column's grid "
+                                                                              "point at ground level")
     storeys: int = param(doc="number of storeys", ge=1, le=50)
     storey_height: float = param(unit="m", doc="floor-to-floor height (columns + slab)", gt=0)
     bays_x: tuple[float, ...] = param(unit="m", doc="column spacings along x", gt=0)
@@ -57,13 +63,22 @@ class StructureConfig:
     column: tuple[float, float] = param(unit="m", doc="column cross-section (x, y)", gt=0)
     wall_thickness: float = param(unit="m", doc="perimeter wall thickness, centred on the grid line", gt=0)
     walls: tuple[Side, ...] = param(("xmin", "xmax", "ymin", "ymax"), doc="sides that carry walls")
-    slab_thickness: float = param(unit="m", doc="floor/roof slab thickness; the slab covers the footprint including columns", gt=0)
+    slab_thickness: float = param(unit="m", doc="floor/roof slab thickness; the slab covers the footprint including "
+                                                "columns", gt=0)
     openings: tuple[OpeningConfig, ...] = param((), doc="doors and windows")
     block_size: float = param(unit="m", doc="largest block edge; members are cut into equal blocks no longer than this", gt=0)
     sphere_radius: float = param(unit="m", doc="radius of the surface spheres (every block edge must be >= 2 radii)", gt=0)
     material: str = param(doc="material name in dem.materials (contact parameters of the spheres)")
-    density: float | None = param(None, unit="kg/m³", doc="density of the solid blocks (mass and inertia come from the box); null = the material's density", gt=0)
-    foundation: float = param(0.0, unit="m", doc="thickness of a fixed foundation slab under the footprint, its top at the origin's z; every block standing on it is bonded to it by dem.cohesive, so the building is anchored and its ground-floor joints carry the base shear (without it the building stands loose on the ground and slides as a whole once the lateral load passes friction × weight). The foundation never moves, comes after the building's blocks, and the fluid does not see it (it lies below the ground); 0 = none. At least 2 sphere radii", ge=0)
+    density: float | None = param(None, unit="kg/m³", doc="density of the solid blocks (mass and inertia come from "
+                                                          "the box); null = the material's density", gt=0)
+    foundation: float = param(0.0, unit="m", doc="thickness of a fixed foundation slab under the footprint, its top "
+                                                 "at the origin's z; every block standing on it is bonded to it by "
+                                                 "dem.cohesive, so the building is anchored and its ground-floor "
+                                                 "joints carry the base shear (without it the building stands loose "
+                                                 "on the ground and slides as a whole once the lateral load passes "
+                                                 "friction × weight). The foundation never moves, comes after the "
+                                                 "building's blocks, and the fluid does not see it (it lies below "
+                                                 "the ground); 0 = none. At least 2 sphere radii", ge=0)
 
     def __post_init__(self) -> None:
         if not self.bays_x or not self.bays_y:

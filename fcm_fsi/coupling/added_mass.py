@@ -37,7 +37,8 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ..fluid.solvers import DIRECT_LU, make_ksp, solve as solve_ksp
+from ..fluid.solvers import DIRECT_LU, make_ksp
+from ..fluid.solvers import solve as solve_ksp
 from ..fluid.tagged_form import TaggedForm
 
 #: solver of the pressure-impulse Laplacian (a symmetric positive definite P1 system)

@@ -45,8 +45,8 @@ from ..dem.state import DEMState, quat_to_matrix_np
 from ..dem.system import DEMSystem, substep_count
 from ..fcm.levelset import BOX, SPHERE, Shapes
 
-__all__ = ["DEMSubcycler", "Exchange", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio", "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity",
-           "shapes_of_blocks", "state_digests", "substep_count"]
+__all__ = ["DEMSubcycler", "Exchange", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio",
+           "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity", "shapes_of_blocks", "state_digests", "substep_count"]
 
 REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # compared across ranks
 
@@ -254,7 +254,6 @@ def cluster_rigid_motion(pos: np.ndarray, vel: np.ndarray, omega: np.ndarray, ma
     the cluster's momentum and angular momentum, and blocks that move as one rigid body get
     exactly their own velocities back. A cluster holding a ``fixed`` block is at rest
     (V = Ω = 0); a block alone in its cluster keeps its own pos, v, ω exactly."""
-    nb = len(mass)
     X, V, W = pos.copy(), vel.copy(), omega.copy()
     counts = np.bincount(labels, minlength=labels.max(initial=-1) + 1)
     multi = counts[labels] > 1

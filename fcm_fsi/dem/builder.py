@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config.loader import ConfigError
-from ..config.structure import StructureConfig
+from ..config.structure import CohesiveConfig, StructureConfig
 from .bodies import box_template
 from .cohesive import BondFace, CohesiveBonds, CohesiveLaw
 
@@ -63,7 +63,7 @@ class Structure:
         q[:, 0] = 1.0
         return q
 
-    def subset(self, keep) -> "Structure":
+    def subset(self, keep) -> Structure:
         """The blocks where ``keep`` is true, renumbered; faces to dropped blocks vanish."""
         keep = np.asarray(keep, bool)
         new_id = np.cumsum(keep) - 1
@@ -258,16 +258,15 @@ PAPER_BUILDING = {
 }
 
 
-def paper_building() -> tuple[StructureConfig, "CohesiveConfig"]:
+def paper_building() -> tuple[StructureConfig, CohesiveConfig]:
     """The preset :data:`PAPER_BUILDING`, validated by the strict loader."""
     from ..config.loader import build
-    from ..config.structure import CohesiveConfig
     src = "fcm_fsi.dem.builder.PAPER_BUILDING"
     return (build(StructureConfig, PAPER_BUILDING["structure"], src, prefix="dem.structure"),
             build(CohesiveConfig, PAPER_BUILDING["cohesive"], src, prefix="dem.cohesive"))
 
 
-def load_structure(path) -> tuple[StructureConfig, "CohesiveConfig | None"]:
+def load_structure(path) -> tuple[StructureConfig, CohesiveConfig | None]:
     """Read ``dem.structure`` (and ``dem.cohesive`` if present) from a case file, strictly.
 
     Serves until the case schema carries these sections itself (docs/cohesive.md)."""

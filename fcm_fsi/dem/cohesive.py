@@ -257,7 +257,7 @@ class CohesiveLaw:
         return 0.5625 * self.sigma_c * self.delta_f
 
     @classmethod
-    def from_config(cls, cfg) -> "CohesiveLaw":
+    def from_config(cls, cfg) -> CohesiveLaw:
         """From a :class:`fcm_fsi.config.structure.CohesiveConfig`."""
         return cls(sigma_c=cfg.sigma_c, delta_f=cfg.delta_f,
                    delta_tc=cfg.delta_f if cfg.delta_tc is None else cfg.delta_tc,
@@ -331,7 +331,7 @@ class CohesiveBonds:
 
     @classmethod
     def from_faces(cls, law: CohesiveLaw, faces: list[BondFace], pos, quat,
-                   points_per_edge: int) -> "CohesiveBonds":
+                   points_per_edge: int) -> CohesiveBonds:
         """Bonds on ``faces`` of blocks at ``pos``/``quat`` (the bonded reference state)."""
         from .state import quat_to_matrix_np
         R = quat_to_matrix_np(np.asarray(quat, float).reshape(-1, 4))

@@ -42,7 +42,8 @@ class Controls:
     def _target(self, c: Control, d: int, t: float, dt: float) -> float:
         if c.modes[d] == "velocity":
             return c.values[d]
-        frac = (lambda s: min(s / c.ramp, 1.0) if c.ramp > 0 else 1.0)
+        def frac(s: float) -> float:
+            return min(s / c.ramp, 1.0) if c.ramp > 0 else 1.0
         return c.values[d] * (frac(t + dt) - frac(t)) / dt
 
     def add_forces(self, force, torque) -> None:

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..config.dem import BlockConfig, DEMConfig, GeneratorConfig, WallConfig
+from ..config.dem import BlockConfig, DEMConfig, GeneratorConfig
 from ..config.loader import ConfigError
 from ..io.logging import get_logger
 from .bodies import BlockTemplate, axis_angle_quat, box_template, clump_template, matrix_to_quat
@@ -44,7 +44,8 @@ def _generated(g: GeneratorConfig, tmpl: BlockTemplate) -> tuple[np.ndarray, np.
     n = np.maximum(np.floor((hi - lo) / a).astype(int) + 1, 1)
     if np.any(hi < lo) or np.prod(n) < g.count:
         raise ConfigError(f"key 'dem.generators[].count' = {g.count} blocks of bounding radius {R:.4g} m "
-                          f"do not fit in region {g.region_min}..{g.region_max} (room for {int(np.prod(n)) if np.all(hi >= lo) else 0})")
+                          f"do not fit in region {g.region_min}..{g.region_max} "
+                          f"(room for {int(np.prod(n)) if np.all(hi >= lo) else 0})")
     idx = np.arange(g.count)
     ijk = np.stack([idx % n[0], (idx // n[0]) % n[1], idx // (n[0] * n[1])], axis=1)
     pos = lo + a * ijk + rng.uniform(-0.02 * R, 0.02 * R, size=(g.count, 3))

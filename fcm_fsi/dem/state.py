@@ -83,7 +83,7 @@ class DEMState:
 
     @classmethod
     def from_blocks(cls, pos, quat, mass, inertia, sph_block, sph_local, sph_radius,
-                    sph_material=None, vel=None, omega=None, fixed=None) -> "DEMState":
+                    sph_material=None, vel=None, omega=None, fixed=None) -> DEMState:
         """Assemble a state; spheres are re-ordered by block (stable) if needed."""
         pos = np.array(pos, dtype=np.float64).reshape(-1, 3)
         nb = pos.shape[0]

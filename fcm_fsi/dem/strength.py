@@ -51,7 +51,7 @@ def section_capacity(b: float, h: float, law: CohesiveLaw, n: int = 20000) -> fl
     for theta in np.geomspace(1e-4, 50.0, 600) * law.delta_f / h:
         if stress(theta, h).sum() <= 0.0:     # tension side fully broken
             break
-        zn = brentq(lambda zn: stress(theta, zn).sum(), 0.0, h, xtol=1e-14 * h)
+        zn = brentq(lambda zn: stress(theta, zn).sum(), 0.0, h, xtol=1e-14 * h)   # noqa: B023 (called here)
         best = max(best, float(np.sum(stress(theta, zn) * (h / 2 - z)) * b * h / n))
     return best
 

@@ -20,9 +20,8 @@ import math
 import numpy as np
 
 from . import L_DASHPOT, L_FRICTION, L_SPRING, LEDGER_SLOTS
-from .contact import HIST
 from .bodies import update_sphere_positions
-from .contact import SphereContact, WallContact
+from .contact import HIST, SphereContact, WallContact
 from .control import Controls
 from .fused import advance_blocks
 from .integrate import drift, kick, omega_from_angmom

@@ -91,24 +91,24 @@ class Shapes:
         return len(self.kind)
 
     @classmethod
-    def sphere(cls, centre, r: float, body: int = STATIC) -> "Shapes":
+    def sphere(cls, centre, r: float, body: int = STATIC) -> Shapes:
         """Sphere of radius ``r`` [m] centred at ``centre`` [m] (body frame, or world if static)."""
         return cls._one(SPHERE, body, centre, np.eye(3), (r, 0.0, 0.0))
 
     @classmethod
-    def box(cls, centre, size, rot=None, body: int = STATIC) -> "Shapes":
+    def box(cls, centre, size, rot=None, body: int = STATIC) -> Shapes:
         """Box of edge lengths ``size`` = (a, b, c) [m] along the columns of ``rot``
         (shape → body frame, identity by default), centred at ``centre`` [m]."""
         return cls._one(BOX, body, centre, np.eye(3) if rot is None else rot, 0.5 * np.asarray(size, float))
 
     @classmethod
-    def cylinder(cls, centre, r: float, length: float, axis=(0.0, 0.0, 1.0), body: int = STATIC) -> "Shapes":
+    def cylinder(cls, centre, r: float, length: float, axis=(0.0, 0.0, 1.0), body: int = STATIC) -> Shapes:
         """Capped cylinder of radius ``r`` and length ``length`` [m] along ``axis``, centred
         at ``centre`` [m]. In 2D (points at z = 0) the default axis gives a disc of radius r."""
         return cls._one(CYLINDER, body, centre, _frame_with_z_along(axis), (r, 0.5 * length, 0.0))
 
     @classmethod
-    def concat(cls, parts: list["Shapes"]) -> "Shapes":
+    def concat(cls, parts: list[Shapes]) -> Shapes:
         """All primitives of ``parts``, in order."""
         if not parts:
             return cls(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)),
@@ -117,7 +117,7 @@ class Shapes:
                      for f in ("kind", "body", "offset", "rot", "half")))
 
     @classmethod
-    def _one(cls, kind, body, centre, rot, half) -> "Shapes":
+    def _one(cls, kind, body, centre, rot, half) -> Shapes:
         return cls(np.array([kind]), np.array([body]), np.reshape(centre, (1, 3)),
                    np.reshape(rot, (1, 3, 3)), np.reshape(half, (1, 3)))
 
@@ -499,9 +499,10 @@ def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: fl
                               walls=None, fill=None):
     """Brute-force NumPy reference of :meth:`StructureLevelSet.evaluate` (all points × all
     primitives, and the gap fill from the per-owner minima; ``fill`` = (fill_other,
-    fill_weight) arrays (n, 2) to receive the fill's velocity blend). Each primitive reduces to a box in its symmetry coordinates: a sphere is the
-    interval |ρ₃| ≤ r in the distance ρ₃ from its centre, a cylinder the rectangle
-    |ρ| ≤ r, |z| ≤ h/2 in (radial distance, axial coordinate)."""
+    fill_weight) arrays (n, 2) to receive the fill's velocity blend). Each primitive reduces to
+    a box in its symmetry coordinates: a sphere is the interval |ρ₃| ≤ r in the distance ρ₃
+    from its centre, a cylinder the rectangle |ρ| ≤ r, |z| ≤ h/2 in (radial distance, axial
+    coordinate)."""
     x = np.asarray(x, np.float64)
     phi = np.full(len(x), float(cutoff))
     owner = np.full(len(x), NO_SHAPE, np.int64)

@@ -286,7 +286,8 @@ def fitted_weights_reference(coords, values, ref_points, ref_weights):
         cut_pts = np.array([x[i] + s[i] / (s[i] - s[j]) * (x[j] - x[i])
                             for i in range(nv) for j in range(i + 1, nv) if (s[i] >= 0) != (s[j] >= 0)])
         fluid_pts = np.vstack([x[s >= 0], cut_pts])
-        mono = lambda X: np.array([_monomials_np((p - centre) / scale) for p in X])
+        def mono(X, centre=centre, scale=scale):
+            return np.array([_monomials_np((p - centre) / scale) for p in X])
         mv = _hull_moments(fluid_pts, mono)
         ms = _planar_moments(cut_pts, mono)
         xq = x[0] + ref_points @ (x[1:] - x[0])

@@ -7,8 +7,8 @@ one point (the closed-cavity null space).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 from dolfinx import fem

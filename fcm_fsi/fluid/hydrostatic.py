@@ -15,9 +15,10 @@ Every term of eq 5 that contains the pressure uses p' + Π. The continuous equat
 unchanged (any Π is a change of the pressure unknown), the discrete ones are not: the discrete
 pressure now lives in Π + P1 instead of P1, which contains the exact hydrostatic pressure of a
 layered fluid. For layered ρ (a fluid at rest: ρ depends on the height only; on a mesh whose nodes
-lie in horizontal layers its P1 interpolant is then exactly the gradient of a P2 Π) the discrete rest state u = 0, p' = 0 is then exact, and near
-rest the residual that drives spurious currents is the curl part of ρ f only. In motion the
-two discretisations differ by discretisation error (tested on the verification cases).
+lie in horizontal layers its P1 interpolant is then exactly the gradient of a P2 Π) the
+discrete rest state u = 0, p' = 0 is then exact, and near rest the residual that drives
+spurious currents is the curl part of ρ f only. In motion the two discretisations differ by
+discretisation error (tested on the verification cases).
 
 Cost: one P2 Poisson solve per time step when ρ changes: in 2D triangular solves with the factorisation
 made once (PETSc Cholesky on one rank, MUMPS on more), in 3D CG + BoomerAMG.

@@ -16,8 +16,8 @@ and the quadrature degree is set explicitly.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 import ufl

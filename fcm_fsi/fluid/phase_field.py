@@ -25,19 +25,18 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
+from dolfinx import fem
+from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_vector
 from mpi4py import MPI
 from petsc4py import PETSc
-
-from dolfinx import fem
-import dolfinx.fem.petsc
-from dolfinx.fem.petsc import assemble_matrix, assemble_vector, create_vector
 
 from ..config.loader import ConfigError
 from ..config.phase_field import InitialShape, PhaseFieldConfig
 from ..fcm.cut import cut_measures
 from ..mesh.build import cell_sizes
 from .initial import signed_distance
-from .solvers import make_ksp, solve as solve_ksp
+from .solvers import make_ksp
+from .solvers import solve as solve_ksp
 
 # Quadrature degree per form: with the P1 nodal normal the conservative integrands are
 # polynomials of degree ≤ 3 (exact at degree 3); the classical reaction term
@@ -255,7 +254,8 @@ class PhaseField:
         self.L = fem.form(ufl.rhs(F))
         self.mass_form = fem.form(self.phi * ufl.dx(metadata={"quadrature_degree": 2}))
         n_b = ufl.FacetNormal(msh)
-        self.outflow_form = fem.form(0.5 * (self.phi + self.phi_n) * 0.5 * (ufl.dot(self.u, n_b) + abs(ufl.dot(self.u, n_b))) * ds)
+        u_out = 0.5 * (ufl.dot(self.u, n_b) + abs(ufl.dot(self.u, n_b)))      # (u·n)⁺
+        self.outflow_form = fem.form(0.5 * (self.phi + self.phi_n) * u_out * ds)
         self.outflow_total = 0.0  # ∫∫ φ_θ (u·n)⁺ ds dt: liquid that left through the boundary [m^d]
         self.A = assemble_matrix(self.a)
         self.b = create_vector(self.L)
@@ -306,7 +306,7 @@ class PhaseField:
             1.5 * self.phi_n.x.array - 0.5 * self.phi_nm1.x.array
         self.normal.update()
         self.phi_k.x.array[:] = self.phi_star.x.array
-        for it in range(1, self.cfg.picard_max_iterations + 1):
+        for it in range(1, self.cfg.picard_max_iterations + 1):     # noqa: B007 (returned)
             self.solve_linearised()
             change = self.comm.allreduce(float(np.abs(self.phi.x.array - self.phi_k.x.array).max(initial=0.0)),
                                          op=MPI.MAX)

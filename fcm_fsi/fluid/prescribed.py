@@ -2,9 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
-from mpi4py import MPI
-
 from dolfinx import fem
+from mpi4py import MPI
 
 from ..config.phase_field import PrescribedVelocity
 

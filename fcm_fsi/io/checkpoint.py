@@ -25,7 +25,6 @@ from mpi4py import MPI
 
 from ..config.loader import ConfigError, to_dict
 
-
 # Options added after checkpoints were already being written, with the value that does what
 # the code did before the option existed. A checkpoint hashed without such an option is still
 # accepted when the case leaves the option at that value (and only then). Add new options here.

@@ -2,13 +2,12 @@
 graded away from the structure's faces."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
-from mpi4py import MPI
-
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from ..config.loader import ConfigError
 from ..config.mesh import MeshConfig

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 from dolfinx import mesh as dmesh
-from mpi4py import MPI
 
 CACHE = Path(__file__).resolve().parents[2] / "meshes" / "cache"
 CHANNEL_NAMES = {"inlet": 1, "outlet": 2, "walls": 3, "cylinder": 4}

@@ -24,13 +24,13 @@ import numpy as np
 from mpi4py import MPI
 
 from ..config.case import Case
+from ..fluid.navier_stokes import NonlinearSolveError
+from ..fluid.solvers import LinearSolveError
 from ..io.checkpoint import accepted_fingerprints, case_fingerprint, read_checkpoint, write_checkpoint
 from ..io.csv import TimeSeriesCSV
 from ..io.fields import FieldWriter
 from ..io.logging import get_logger
 from ..io.timing import StageTimer, peak_memory_line, peak_memory_mib
-from ..fluid.navier_stokes import NonlinearSolveError
-from ..fluid.solvers import LinearSolveError
 
 log = get_logger("run")
 

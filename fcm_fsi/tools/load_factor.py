@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from ..config.loader import ConfigError
-from ..io.csv import read_series
 from ..dem.bond_report import bonded_structure, traction_ratio
+from ..io.csv import read_series
 
 
 @dataclass(frozen=True)

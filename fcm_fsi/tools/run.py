@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     write_resolved_case(case, out, comm.rank)
     comm.barrier()
     log.info("case %s (%s) on %d rank(s) -> %s", case.name, case.physics, comm.size, out)
-    from ..simulation.loop import SimulationDiverged, StopRequested   # imports PETSc, and with it the BLAS
+    from ..simulation.loop import SimulationDiverged, StopRequested  # imports PETSc, and with it the BLAS
     if reference_blas_loaded():
         log.warning("running on the reference BLAS: direct (MUMPS) solves are about 3x slower; "
                     "install libopenblas0-serial (.ci/setup.sh, docs/performance.md)")

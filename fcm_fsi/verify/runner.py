@@ -58,6 +58,7 @@ def run_one(name: str, level: str, out: Path, np_: int, log_level: str = "WARNIN
         rc = subprocess.call(cmd, env=env)
         return rc == 0
     from mpi4py import MPI
+
     from ..simulation.loop import STOP_FILE, StopRequested
     comm = MPI.COMM_WORLD
     set_resume(resume)

@@ -322,7 +322,8 @@ def three_point_bending(n_blocks: int, ell: float, b: float, h: float, mode: str
     t_slow = slow_periods * period
     v_slow = 0.06 * p_el / k_beam / t_slow
     v_fast = 4.5 * p_el / k_beam / fast_time
-    ramp = lambda t, t0, tr: 0.5 * (1 - np.cos(np.pi * min(max(t - t0, 0.0) / tr, 1.0)))
+    def ramp(t, t0, tr):
+        return 0.5 * (1 - np.cos(np.pi * min(max(t - t0, 0.0) / tr, 1.0)))
 
     def speed(t):
         return v_slow * ramp(t, 0.0, 2 * period) + (v_fast - v_slow) * ramp(t, t_slow, 2 * period)

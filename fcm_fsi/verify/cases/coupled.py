@@ -14,8 +14,8 @@ of a rectangle of B/d = 4 depends on frequency; the estimate is the usual first 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import yaml
@@ -23,8 +23,8 @@ from mpi4py import MPI
 
 from ...config.case import apply_resolution
 from ...io.checkpoint import accepted_fingerprints, checkpoint_attributes
-from ...simulation.coupled import CoupledModel
 from ...io.logging import get_logger
+from ...simulation.coupled import CoupledModel
 from ...simulation.loop import STOP_FILE, SimulationDiverged, StopRequested, TimeLoop
 from ..registry import Metric, at_least, at_most, register, rel_error_metric, report_only, resume_checkpoint
 from ..registry import ranks_per_run as registry_ranks_per_run
@@ -213,7 +213,8 @@ def rotation_angle_z(bodies: Path | dict, block: int = 0) -> tuple[np.ndarray, n
     return b["t"][sel], np.degrees(np.unwrap(theta))
 
 
-@register("dam_break_block", "dam break onto a wet bed hitting a floating block: it is carried and tumbles; water conserved (2D)", issue=8)
+@register("dam_break_block", "dam break onto a wet bed hitting a floating block: it is carried and tumbles; "
+          "water conserved (2D)", issue=8)
 def dam_break_block(level, out_dir: Path, comm) -> list[Metric]:
     """``cases/dam_break_block.yaml``: quick 100 × 30 cells to t = 0.6 s, full 200 × 60 to 1 s.
 

@@ -162,8 +162,9 @@ def submerged_box_run(comm, dim: int, n: int, t_end: float = 1.0, dt: float = 0.
     at rest (ρ 1000, μ 1e-3, g 9.81), held fixed: vertical force and max |u| after ``t_end``.
     ``refine`` (3D): a gmsh mesh, cells 1/n outside and ``refine`` in a zone 3 cells wider than
     the box's bounding box, instead of the structured n³ box."""
-    from ...mesh.channel import box, rectangle
     from scipy.spatial.transform import Rotation
+
+    from ...mesh.channel import box, rectangle
     rho, g = 1000.0, 9.81
     if dim == 2:
         tm = rectangle(comm, n=(n, n))

@@ -48,6 +48,7 @@ def _sphere_on_floor(e: float, clip: bool, gravity, v0: float, z0: float, frac: 
                 "walls": [{"kind": "plane", "material": "m", "point": [0, 0, 0], "normal": [0, 0, 1]}]})
     # dt from Δt_cr: build with a tiny dt, then set dt = Δt_cr/frac and re-check it
     import dataclasses
+
     from ...dem.model import check_time_step
     system = build_system(dataclasses.replace(cfg, dt=1e-12))
     system.dt = system.critical_time_step() / frac
@@ -157,7 +158,6 @@ def bounce(level, out_dir: Path, comm) -> list:
 def _box_on_slope(theta_deg: float, phi_deg: float, frac: float = 10.0):
     """Solid box (0.1 × 0.1 × 0.04 m, 1 kg) resting on the plane z = 0 under gravity tilted
     by θ: slope-parallel axis x, normal z."""
-    import dataclasses
     from ...dem.model import check_time_step
     th = math.radians(theta_deg)
     g = 9.81
@@ -310,7 +310,7 @@ def free_rotation(level, out_dir: Path, comm) -> list:
 def _bessel_peak(n: int, w0: float) -> float:
     """First maximum of v_n(t) = v0 J_2n(2 ω0 t), the exact continuous-time chain."""
     from scipy.optimize import minimize_scalar
-    from scipy.special import jv, jn_zeros
+    from scipy.special import jn_zeros, jv
     nu = 2 * n
     # first maximum of J_nu lies between nu and the first zero of J_nu
     z1 = jn_zeros(nu, 1)[0] if nu > 0 else 2.4048
@@ -331,7 +331,6 @@ def _peak_time(t, v):
 
 @register("chain_wave", "1D chain of preloaded spheres: wave speed vs √(k/m)·dx with discrete dispersion", issue=6)
 def chain_wave(level, out_dir: Path, comm) -> list:
-    import dataclasses
     from ...dem.model import check_time_step
     N = 81 if level == "quick" else 161
     r, k, rho, delta0, v0 = 0.01, 1e5, 2500.0, 1e-3, 0.1
@@ -400,8 +399,8 @@ def repose_config(count: int, seed: int, dt: float = 2.5e-5, t_gate: float = 0.4
     a = 2.0 * 1.69 * r * 1.05                       # lattice spacing of the generator
     per_layer = int((2 * half_width - 2 * 1.69 * r) / a + 1) * 2
     height = 0.0 + (count // per_layer + 2) * a
-    plane = (lambda p, n, until=None: {"kind": "plane", "material": "grain", "point": p, "normal": n,
-                                       "remove_at": until})
+    def plane(p, n, until=None):
+        return {"kind": "plane", "material": "grain", "point": p, "normal": n, "remove_at": until}
     return {"dt": dt, "gravity": [0, 0, -9.81],
             "materials": [{"name": "grain", "stiffness": 1e5, "restitution": 0.3, "friction_angle": 30.0,
                            "density": 2500.0}],

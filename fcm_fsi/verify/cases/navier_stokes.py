@@ -20,8 +20,7 @@ from ...fluid.forces import ReactionForce, probe
 from ...fluid.navier_stokes import NavierStokes
 from ...io.logging import get_logger
 from ...mesh import channel
-from ..registry import (Metric, at_least, at_most, error_order, in_interval, rel_error_metric, register,
-                        report_only)
+from ..registry import Metric, at_least, at_most, error_order, in_interval, register, rel_error_metric, report_only
 
 log = get_logger("verify.navier_stokes")
 
@@ -123,10 +122,10 @@ def taylor_green(level, out_dir: Path, comm) -> list[Metric]:
     if comm.rank == 0:
         plt = _plt()
         fig, ax = plt.subplots(1, 2, figsize=(9, 3.6))
-        ax[0].loglog(hs, errs, "o-", label="‖u − u_exact‖ (dt = %g, ν = %g)" % (dt_s, nu))
+        ax[0].loglog(hs, errs, "o-", label=f"‖u − u_exact‖ (dt = {dt_s:g}, ν = {nu:g})")
         ax[0].loglog(hs, errs[0] * (hs / hs[0]) ** 2, "k--", label="slope 2")
         ax[0].set_xlabel("h"), ax[0].set_ylabel("L2 error"), ax[0].legend(), ax[0].set_title("space")
-        ax[1].loglog(dts[:-1], diffs, "o-", label="‖u_dt − u_dt/2‖ (N = %d, ν = %g)" % (n_t, nu_t))
+        ax[1].loglog(dts[:-1], diffs, "o-", label=f"‖u_dt − u_dt/2‖ (N = {n_t:d}, ν = {nu_t:g})")
         ax[1].loglog(dts, terr, "s:", label="‖u_dt − u_exact‖")
         ax[1].loglog(dts[:-1], diffs[0] * (dts[:-1] / dts[0]) ** 2, "k--", label="slope 2")
         ax[1].set_xlabel("Δt"), ax[1].legend(), ax[1].set_title("time (Crank–Nicolson)")

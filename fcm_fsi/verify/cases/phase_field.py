@@ -6,15 +6,14 @@ from pathlib import Path
 
 import numpy as np
 import ufl
-from mpi4py import MPI
-
 from dolfinx import fem
+from mpi4py import MPI
 
 from ...config import case_from_dict
 from ...io.csv import read_series  # noqa: F401  (re-exported: the verification cases read their CSVs through it)
 from ...simulation.loop import TimeLoop
 from ...simulation.phase_field import PhaseFieldModel
-from ..registry import Metric, at_least, at_most, in_interval, register, report_only
+from ..registry import Metric, at_least, at_most, register, report_only
 
 REVOLUTION = 2.0 * math.pi  # period of u = (−y, x) [s]
 
@@ -227,7 +226,8 @@ def rotating_sphere(level: str, out: Path, comm: MPI.Comm) -> list[Metric]:
         at_most("volume_error", abs(diag["volume_error"]), 5e-3 if level == "full" else 2e-2),
         at_most("mass_balance_error", abs(diag["mass_balance_error"]), 1e-10),
         report_only("mass_drift", abs(diag["mass_drift"]), note="includes the outflow of the tail at the walls"),
-        report_only("shape_error_l1", shape, unit="m", note=f"∫|φ(T)−φ(0)| / interface area, {cells}×{cells}×{cells // 2} boxes × 6 tets"),
+        report_only("shape_error_l1", shape, unit="m",
+                    note=f"∫|φ(T)−φ(0)| / interface area, {cells}×{cells}×{cells // 2} boxes × 6 tets"),
         at_least("phi_min", diag["phi_min"], -0.01),
         at_most("phi_max", diag["phi_max"], 1.01, reference=1.0),
     ]

@@ -6,8 +6,9 @@ level to 1.5 s — long enough for the front to reach and load the building.
 
 KEYs (issue #9): ``completed`` (1 when t_end was reached), ``broken_bonds`` (count at the
 end, reported), ``volume_error`` (largest relative change of the liquid volume {φ ≥ ½} in
-the fluid part, ``liquid_volume_error``, ≤ 0.5 % as for the dam breaks), ``front_wall_fails_first`` (1 when every bond of the first
-breaking step joins a block of the ground-floor front wall — member ``wall xmin s0`` of
+the fluid part, ``liquid_volume_error``, ≤ 0.5 % as for the dam breaks),
+``front_wall_fails_first`` (1 when every bond of the first breaking step joins a block of the
+ground-floor front wall — member ``wall xmin s0`` of
 :func:`fcm_fsi.dem.failure_sequence.member_names`, the wall blocks on the front (x-min) grid
 line of storey 0, columns not included; NaN when no bond broke).
 Reported too: ``back_wall_fails_after_front`` (1 when a back-wall (x-max) bond breaks after the
@@ -30,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..registry import Metric, at_least, at_most, register, report_only
 from ...config import case_from_dict
 from ...dem.failure_sequence import MemberFailure, block_members, failure_sequence
+from ..registry import Metric, at_least, at_most, register, report_only
 from .coupled import case_at_level, run_coupled
 from .phase_field import read_series
 

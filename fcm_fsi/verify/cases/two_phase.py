@@ -17,8 +17,16 @@ from ...config import case_from_dict
 from ...fluid import solvers
 from ...simulation.loop import STOP_FILE, TimeLoop
 from ...simulation.two_phase import TwoPhaseModel
-from ..registry import (Metric, at_least, at_most, in_interval, register, rel_error_metric, report_only,
-                        resume_checkpoint)
+from ..registry import (
+    Metric,
+    at_least,
+    at_most,
+    in_interval,
+    register,
+    rel_error_metric,
+    report_only,
+    resume_checkpoint,
+)
 from .phase_field import read_series
 
 # ---------------------------------------------------------------- references
@@ -142,11 +150,18 @@ def still_water(level: str, out: Path, comm: MPI.Comm) -> list[Metric]:
         fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
         ax[0].semilogy(s["t"], np.maximum(s["u_max"], 1e-12))
         ax[0].axhline(1e-3, color="k", ls="--", label="target 1e-3 m/s")
-        ax[0].set_xlabel("t [s]"); ax[0].set_ylabel("max |u| [m/s]"); ax[0].legend(); ax[0].grid(alpha=0.3)
+        ax[0].set_xlabel("t [s]")
+        ax[0].set_ylabel("max |u| [m/s]")
+        ax[0].legend()
+        ax[0].grid(alpha=0.3)
         ax[1].plot(s["t"][1:], 100 * (s["p_bottom"][1:] - p_ref) / p_ref)
-        ax[1].set_xlabel("t [s]"); ax[1].set_ylabel("bottom pressure error [%]"); ax[1].grid(alpha=0.3)
+        ax[1].set_xlabel("t [s]")
+        ax[1].set_ylabel("bottom pressure error [%]")
+        ax[1].grid(alpha=0.3)
         fig.suptitle(f"still water, {p['cells']}² cells, Δt = {p['dt']} s, {comm.size} rank(s), wall {wall:.0f} s")
-        fig.tight_layout(); fig.savefig(out / "still_water.png", dpi=110); plt.close(fig)
+        fig.tight_layout()
+        fig.savefig(out / "still_water.png", dpi=110)
+        plt.close(fig)
     return [
         at_most("spurious_velocity", float(s["u_max"].max()), 1e-3, unit="m/s"),
         at_most("bottom_pressure_error", abs(s["p_bottom"][-1] - p_ref) / p_ref, 5e-3),
@@ -302,10 +317,14 @@ def _sloshing(p: dict, out: Path, comm: MPI.Comm, thickness: float | None = None
         ax.plot(t, eta_r, lw=0.8, label=f"right wall, band {band:g}")
         ax.plot(t, a0 * np.cos(2 * np.pi * t / SLOSHING_PERIOD), "k:", lw=1, label=f"single fluid, T = {SLOSHING_PERIOD}")
         ax.plot(t, a0 * np.cos(2 * np.pi * t / t_two), "k--", lw=1, label=f"two-layer theory, T = {t_two:.4f}")
-        ax.set_xlabel("t [s]"); ax.set_ylabel("η [m]"); ax.legend(fontsize=7, loc="lower left"); ax.grid(alpha=0.3)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("η [m]")
+        ax.legend(fontsize=7, loc="lower left")
+        ax.grid(alpha=0.3)
         ax.set_title(f"sloshing{' 3D' if thickness else ''}: Δt = {p['dt']}, {comm.size} rank(s), "
                      f"wall {wall_total:.0f} s", fontsize=10)
-        fig.tight_layout(); fig.savefig(out / ("sloshing_3d.png" if thickness else "sloshing.png"), dpi=110)
+        fig.tight_layout()
+        fig.savefig(out / ("sloshing_3d.png" if thickness else "sloshing.png"), dpi=110)
         plt.close(fig)
     fine = len(p["bands"]) > 1
     metrics = [rel_error_metric("period", period, t_two, SLOSH_FINE_TOL if fine else SLOSH_COARSE_TOL, unit="s")]
@@ -458,12 +477,19 @@ def _dam_break(p: dict, out: Path, comm: MPI.Comm, dim: int = 2) -> list[Metric]
         ax[0].plot(T, Z, label=f"computed, a/h = {p['per_a']}")
         ax[0].plot(T + shift, Z, ":", color="C0", lw=1, label=f"computed, delayed by ΔT = {shift:.3f}")
         ax[0].plot(MM_FRONT[:, 0], MM_FRONT[:, 1], "ko", label="Martin & Moyce (1952)")
-        ax[0].set_xlabel("T = n t √(g/a)"); ax[0].set_ylabel("Z = front / a"); ax[0].legend(); ax[0].grid(alpha=0.3)
+        ax[0].set_xlabel("T = n t √(g/a)")
+        ax[0].set_ylabel("Z = front / a")
+        ax[0].legend()
+        ax[0].grid(alpha=0.3)
         ax[1].plot(tau, H, label="computed")
-        ax[1].set_xlabel("τ = t √(g/a)"); ax[1].set_ylabel("H = height / (n² a)"); ax[1].legend(); ax[1].grid(alpha=0.3)
+        ax[1].set_xlabel("τ = t √(g/a)")
+        ax[1].set_ylabel("H = height / (n² a)")
+        ax[1].legend()
+        ax[1].grid(alpha=0.3)
         fig.suptitle(f"dam break {dim}D n² = 2, a = {MM_A} m: mean |ΔZ| = {dev:.3f}, after ΔT: {dev_shifted:.3f} "
                      f"({comm.size} rank(s), wall {wall:.0f} s)")
-        fig.tight_layout(); fig.savefig(out / ("dam_break_3d.png" if dim == 3 else "dam_break.png"), dpi=110)
+        fig.tight_layout()
+        fig.savefig(out / ("dam_break_3d.png" if dim == 3 else "dam_break.png"), dpi=110)
         plt.close(fig)
     return [
         at_most("front_mean_abs_dev_shifted", dev_shifted, FRONT_SHIFTED_TOL),
