@@ -8,8 +8,7 @@ import yaml
 
 from fcm_fsi.config import ConfigError, case_from_dict, load_case
 from fcm_fsi.preflight import check_case, estimate_mesh
-
-from .conftest import ROOT
+from tests.conftest import ROOT
 
 PLENTY = 1.0e15          # bytes: no memory limit
 

@@ -14,7 +14,7 @@ Everything block b's step needs is block b's own data (the pair forces were comp
 before), so this is race-free; each operation is the same arithmetic in the same order as
 the stage-by-stage path (``compute_forces``, ``kick``, ``drift``,
 ``update_sphere_positions``), so the two paths agree bit for bit in the state
-(tests/test_dem_fused.py; only the summation order of the ledger energies differs).
+(tests/dem/test_dem_fused.py; only the summation order of the ledger energies differs).
 
 The per-block work is a plain (serial) function over a range of blocks, called on
 ``CHUNKS`` contiguous ranges in parallel: the parallel kernel stays small (quick to

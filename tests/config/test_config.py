@@ -5,8 +5,7 @@ import pytest
 
 from fcm_fsi.config import ConfigError, case_from_dict, load_case
 from fcm_fsi.config.docs import reference_markdown
-
-from .conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli
 
 GOOD = {"name": "t", "run": {"t_end": 1.0, "dt": 0.1},
         "mesh": {"kind": "rectangle", "lower": [0, 0], "upper": [1, 1], "cells": [4, 4]},

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .conftest import ROOT, run_cli
-from .test_coupled import read
+from tests.conftest import ROOT, run_cli
+from tests.simulation.test_coupled import read
 
 
 def test_tsunami_case_starts_with_the_building_at_rest_on_two_ranks(tmp_path):

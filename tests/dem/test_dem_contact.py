@@ -9,8 +9,6 @@ from fcm_fsi.dem.contact import damping_ratio, restitution_clipped, restitution_
 from fcm_fsi.dem.system import critical_time_step
 from fcm_fsi.verify.cases.dem import _measure_restitution, _slide
 
-pytestmark = pytest.mark.usefixtures("one_numba_thread")
-
 
 def ode_restitution(h: float, clip: bool) -> float:
     """Integrate m δ'' = −(kδ + cδ') (m = k = 1) from δ = 0, δ' = 1 until the force (clip)

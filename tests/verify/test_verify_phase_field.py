@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from .conftest import ROOT, mpi_env
+from tests.conftest import ROOT, mpi_env
 
 
 def run_verify(args: list[str], timeout: float = 900) -> subprocess.CompletedProcess:

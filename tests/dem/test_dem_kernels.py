@@ -18,8 +18,6 @@ from fcm_fsi.dem.integrate import drift, drift_ref, kick
 from fcm_fsi.dem.neighbours import build_pairs, build_pairs_ref, carry_history, sphere_pair_map
 from fcm_fsi.dem.state import DEMState
 
-pytestmark = pytest.mark.usefixtures("one_numba_thread")
-
 
 def random_state(nb=40, per=3, seed=1, box=0.08):
     rng = np.random.default_rng(seed)

@@ -13,7 +13,7 @@ from fcm_fsi.io.timing import StageTimer
 from fcm_fsi.simulation.two_phase import GAS_PHI, TwoPhaseModel, property_map
 from fcm_fsi.verify.cases.two_phase import period_from_gauge, sloshing_case, still_water_case
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def advance(model: TwoPhaseModel, steps: int, dt: float) -> dict[str, float]:
@@ -147,7 +147,7 @@ def test_restart_reproduces_uninterrupted_sloshing(tmp_path):
     """4 steps = 2 steps + restart + 2 steps (φ, u and p), on a moving free surface."""
     import yaml
 
-    from .conftest import run_cli, run_half_and_resume
+    from tests.conftest import run_cli, run_half_and_resume
     data = sloshing_case(size=0.1, band=0.02, dt=0.05, t_end=0.2)
     data["run"]["checkpoint_every"] = 2
     data["output"] = {"xdmf": False, "checkpoint": True}
@@ -188,7 +188,7 @@ def test_still_water_quick_level_passes(tmp_path):
     static pressure Π)."""
     import json
 
-    from .conftest import mpi_env
+    from tests.conftest import mpi_env
     res = subprocess.run([sys.executable, "-m", "fcm_fsi", "verify", "still_water", "--level", "quick",
                           "--out", str(tmp_path)], cwd=ROOT, env=mpi_env(), capture_output=True, text=True,
                          timeout=900)

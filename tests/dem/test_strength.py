@@ -13,8 +13,7 @@ from fcm_fsi.dem.strength import (
     mc2010_tensile_strength,
     section_capacity,
 )
-
-from .conftest import ROOT
+from tests.conftest import ROOT
 
 
 def _law(sigma_c=1.0e7, delta_f=0.02, penalty=1.0):

@@ -19,9 +19,7 @@ from fcm_fsi.dem.state import quat_to_matrix_np
 from fcm_fsi.fcm.levelset import FaceDistance, Shapes, signed_distance_reference
 from fcm_fsi.mesh.build import build_mesh, cell_size_function, cell_sizes
 from tests.conftest import ROOT, mpi_env, run_cli
-from tests.test_levelset import random_poses, random_shapes
-
-pytestmark = pytest.mark.usefixtures("one_numba_thread")
+from tests.fcm.test_levelset import random_poses, random_shapes
 
 
 def test_face_distance_is_the_reference_level_sets_magnitude():

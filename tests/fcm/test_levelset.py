@@ -10,8 +10,6 @@ from fcm_fsi.dem.bodies import axis_angle_quat
 from fcm_fsi.dem.state import DEMState, quat_to_matrix_np
 from fcm_fsi.fcm.levelset import NO_SHAPE, WALL, Shapes, StructureLevelSet, signed_distance_reference
 
-pytestmark = pytest.mark.usefixtures("one_numba_thread")
-
 
 def random_rotation(rng) -> np.ndarray:
     q = rng.normal(size=4)

@@ -14,8 +14,7 @@ import pytest
 import yaml
 
 from fcm_fsi.config import ConfigError, case_from_dict
-
-from .conftest import ROOT, mpi_env, run_cli, run_half_and_resume
+from tests.conftest import ROOT, mpi_env, run_cli, run_half_and_resume
 
 
 def coarse_case(t_end: float = 0.06) -> dict:

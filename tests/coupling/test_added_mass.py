@@ -163,8 +163,8 @@ def test_the_potential_added_mass_is_the_one_that_destabilises_the_explicit_coup
     run with the estimate as m̃ (factor 1) reach its end."""
     import yaml
 
-    from .conftest import run_cli
-    from .test_coupled import read
+    from tests.conftest import run_cli
+    from tests.simulation.test_coupled import read
     runs = {}
     for name, factor in (("none", 0.0), ("potential", 1.0)):
         case = tmp_path / f"{name}.yaml"
@@ -199,8 +199,8 @@ def test_coupled_fluid_force_converges_to_the_potential_added_mass(tmp_path):
     −3 %: higher-order terms)."""
     import yaml
 
-    from .conftest import run_cli
-    from .test_coupled import read
+    from tests.conftest import run_cli
+    from tests.simulation.test_coupled import read
     R, rho, g = 0.08, 1000.0, 9.81
     V = np.pi * R ** 2 * (4 * R / 3)
     m_eff = {}

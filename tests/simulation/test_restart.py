@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from .conftest import run_cli, run_half_and_resume
+from tests.conftest import run_cli, run_half_and_resume
 
 CASE = {"name": "restart", "run": {"t_end": 0.4, "dt": 0.02, "checkpoint_every": 10, "log_every": 5},
         "mesh": {"kind": "rectangle", "lower": [-1, -1], "upper": [1, 1], "cells": [24, 24]},
@@ -100,7 +100,7 @@ def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path, c
     from fcm_fsi.config.case import load_case
     from fcm_fsi.fluid.solvers import LinearSolveError
     from fcm_fsi.simulation.loop import SimulationDiverged, TimeLoop
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     case = load_case(root / "cases" / "still_water.yaml", ["output.xdmf=false", "output.checkpoint=false"])
     caplog.set_level(logging.INFO, logger="fcm_fsi")
     logger = logging.getLogger("fcm_fsi")      # does not propagate once setup_logging ran in this process
@@ -382,7 +382,7 @@ def test_sigterm_ends_the_run_after_its_step_with_a_checkpoint(tmp_path):
     import sys
     import time
 
-    from .conftest import ROOT, mpi_env
+    from tests.conftest import ROOT, mpi_env
     case = tmp_path / "case.yaml"
     data = dict(CASE, run=dict(CASE["run"], t_end=200.0, checkpoint_every=100000, log_every=1000))
     case.write_text(yaml.safe_dump(data))

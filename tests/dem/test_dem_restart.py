@@ -8,8 +8,6 @@ from fcm_fsi.config.case import case_from_dict
 from fcm_fsi.dem.driver import run_dem_case
 from fcm_fsi.verify.cases.dem import repose_config
 
-pytestmark = pytest.mark.usefixtures("one_numba_thread")
-
 
 def case(t_end):
     dem = repose_config(24, 3, t_gate=0.01)

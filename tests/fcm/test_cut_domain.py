@@ -26,9 +26,6 @@ from fcm_fsi.fluid.solvers import ITERATIVE_3D
 from fcm_fsi.mesh.channel import rectangle
 from fcm_fsi.verify.registry import load_all
 
-pytestmark = pytest.mark.usefixtures("one_numba_thread")
-
-
 # ------------------------------------------------------------------ moment fitting
 
 def reference_rule(gdim: int) -> tuple[np.ndarray, np.ndarray]:

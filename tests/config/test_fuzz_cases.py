@@ -17,8 +17,7 @@ import pytest
 import yaml
 
 from fcm_fsi.cli import main
-
-from .conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli
 
 CASES = sorted((ROOT / "cases").glob("*.yaml"))
 NUMBER_MUTATIONS = ("negative", "zero", "nan", "inf", "word", "list")

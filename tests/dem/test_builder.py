@@ -9,7 +9,7 @@ from fcm_fsi.config.structure import CohesiveConfig, StructureConfig
 from fcm_fsi.dem.builder import KINDS, PAPER_BUILDING, assemble, build_building, load_structure, paper_building
 from fcm_fsi.dem.cohesive import CohesiveLaw
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

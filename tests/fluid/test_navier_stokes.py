@@ -18,7 +18,7 @@ from fcm_fsi.fluid.forces import ReactionForce
 from fcm_fsi.fluid.navier_stokes import NavierStokes, NonlinearSolveError
 from fcm_fsi.mesh.channel import rectangle
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def poiseuille(n: int, mu: float = 0.1):

@@ -23,8 +23,7 @@ from fcm_fsi.coupling.dem_side import (
 from fcm_fsi.dem.model import build_state, build_structure, build_system
 from fcm_fsi.dem.state import quat_to_matrix_np
 from fcm_fsi.fcm.levelset import BOX, SPHERE
-
-from .conftest import ROOT, mpi_env
+from tests.conftest import ROOT, mpi_env
 
 MAT = {"name": "m", "stiffness": 1e5, "restitution": 0.5, "friction_angle": 20.0, "density": 2000.0}
 
@@ -61,7 +60,7 @@ def test_substep_count_names_both_steps_and_the_nearest_valid_dem_dt(fluid_dt, d
 
 
 # ------------------------------------------------------------------ impulse delivered
-def test_held_force_gives_closed_form_velocity_and_impulse(one_numba_thread):
+def test_held_force_gives_closed_form_velocity_and_impulse():
     """Free block, constant F over one fluid step: v = (F/m + g)Δt, impulse F·Δt, L = T·Δt."""
     g = np.array([0.0, 0.0, -9.81])
     sub = DEMSubcycler(build_system(dem_config([free_sphere()], g)))
@@ -78,7 +77,7 @@ def test_held_force_gives_closed_form_velocity_and_impulse(one_numba_thread):
     assert 0 < ex.dt_over_dt_cr < 0.2 and ex.wall_seconds > 0
 
 
-def test_mean_velocity_is_the_displacement_over_the_fluid_step(one_numba_thread):
+def test_mean_velocity_is_the_displacement_over_the_fluid_step():
     """``coupling.wall_velocity: mean``: the sub-steps' mean v equals (x_end − x_start)/Δt_f
     (leapfrog), i.e. half the end velocity for a block starting from rest under a constant
     load, and the mean ω likewise; ``rigid_velocity(mean=True)`` uses them."""
@@ -97,7 +96,7 @@ def test_mean_velocity_is_the_displacement_over_the_fluid_step(one_numba_thread)
     np.testing.assert_allclose(sub.rigid_velocity(point, owner), st.vel, rtol=1e-12)
 
 
-def test_linear_mode_delivers_the_trapezoid_impulse(one_numba_thread):
+def test_linear_mode_delivers_the_trapezoid_impulse():
     """Ramp from the previous exchange's load to the new one: Δt (F0 + F1)/2, and the block's
     momentum change is exactly that impulse (no gravity, no contact)."""
     sub = DEMSubcycler(build_system(dem_config([free_sphere()], (0.0, 0.0, 0.0))))
@@ -125,7 +124,7 @@ def test_advance_refuses_a_wrong_load_shape_and_mode():
         sub.advance(1e-3, np.zeros((1, 3)), np.zeros((1, 3)), mode="cubic")
 
 
-def test_a_diverging_load_stops_the_sub_steps_instead_of_crashing_the_neighbour_search(one_numba_thread):
+def test_a_diverging_load_stops_the_sub_steps_instead_of_crashing_the_neighbour_search():
     """A non-finite load makes the state non-finite in one DEM step; the sub-steps stop there
     (the coupled model's check then names the block) instead of the next step's neighbour
     search failing on a NaN grid with a traceback."""
@@ -138,7 +137,7 @@ def test_a_diverging_load_stops_the_sub_steps_instead_of_crashing_the_neighbour_
 
 
 # ------------------------------------------------------------------ interface velocity
-def test_rigid_velocity_is_v_plus_omega_cross_r_on_a_spinning_block(one_numba_thread):
+def test_rigid_velocity_is_v_plus_omega_cross_r_on_a_spinning_block():
     """Box spinning about its principal z axis while translating, no gravity: ω and v stay
     constant, ū(pos + r) = v + ω × r; a resting block and static points give zero."""
     w, v = 3.0, np.array([0.2, -0.1, 0.0])
@@ -370,7 +369,7 @@ def test_cluster_motion_keeps_momentum_and_angular_momentum_and_a_fixed_block_an
     np.testing.assert_array_equal(W, 0.0)
 
 
-def test_coupled_wall_motion_uses_the_intact_bonds_clusters(one_numba_thread):
+def test_coupled_wall_motion_uses_the_intact_bonds_clusters():
     """``CoupledModel._wall_motion`` with ``wall_motion: bonded_cluster``: blocks 0–1 joined by
     an intact bond share their cluster's motion, block 2 (its bond to 1 broken) keeps its own;
     with ``block`` every block keeps its own."""
@@ -399,7 +398,7 @@ def test_coupled_wall_motion_uses_the_intact_bonds_clusters(one_numba_thread):
     np.testing.assert_array_equal(V, st.vel)
 
 
-def test_a_coupled_run_whose_kinetic_energy_exceeds_what_the_system_has_stops(one_numba_thread):
+def test_a_coupled_run_whose_kinetic_energy_exceeds_what_the_system_has_stops():
     """``CoupledModel.health``: kinetic energy of fluid and blocks above the bound (start +
     g × mass × height; no inflow) is a divergence with a message; below it, or without a bound
     (inflow boundaries), the fluid's own verdict stands. The bonded wall with added_mass 2 ×

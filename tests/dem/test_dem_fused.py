@@ -6,8 +6,6 @@ import pytest
 from fcm_fsi.dem.model import build_system
 from fcm_fsi.verify.cases.dem import _cfg, repose_config
 
-pytestmark = pytest.mark.usefixtures("one_numba_thread")
-
 
 def pour(fuse: bool, steps: int = 2400, t_gate=None, tensor: bool = False):
     cfg = repose_config(40, 5, 2.5e-5) if t_gate is None else repose_config(40, 5, 2.5e-5, t_gate=t_gate)

@@ -14,8 +14,8 @@ from fcm_fsi.fcm.hidden import (body_samples, chain_conductance, hidden_pressure
                                 perimeter_samples, radius_conductance, surface_samples)
 from fcm_fsi.fcm.levelset import BOX, CYLINDER, SPHERE, Shapes
 
-from .conftest import run_cli
-from .test_coupled import series_on_one_and_two_ranks, sliding_pocket_case
+from tests.conftest import run_cli
+from tests.simulation.test_coupled import series_on_one_and_two_ranks, sliding_pocket_case
 
 RHO, G = 998.2, 9.81
 
@@ -259,7 +259,7 @@ def test_verify_buoyancy_quick_level_passes(tmp_path):
     """``verify buoyancy --level quick``: the 2D lying, tilted, stacked and clumped bodies within
     1 % of Archimedes at 5 mm cells, the 3D lying and tilted blocks at 7 mm."""
     import json
-    from .test_verify_phase_field import run_verify
+    from tests.verify.test_verify_phase_field import run_verify
     res = run_verify(["buoyancy", "--level", "quick", "--out", str(tmp_path)])
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     metrics = json.loads((tmp_path / "buoyancy" / "metrics.json").read_text())["metrics"]

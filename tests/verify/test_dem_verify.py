@@ -9,9 +9,6 @@ from mpi4py import MPI
 
 from fcm_fsi.verify.registry import load_all
 
-pytestmark = pytest.mark.usefixtures("one_numba_thread")
-
-
 KNOWN_MISS: set = set()
 
 

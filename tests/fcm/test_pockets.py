@@ -11,8 +11,7 @@ import pytest
 from mpi4py import MPI
 
 from fcm_fsi.fcm.pockets import PocketVents, fluid_components
-
-from .conftest import ROOT, mpi_env
+from tests.conftest import ROOT, mpi_env
 
 
 def grid(n):
@@ -135,7 +134,7 @@ imap = S.dofmap.index_map
 n = imap.size_local + imap.num_ghosts
 cells = S.dofmap.list.array.reshape(-1, 3)
 p = S.tabulate_dof_coordinates()[:n]
-from tests.test_pockets import ring_with_slot
+from tests.fcm.test_pockets import ring_with_slot
 plain, filled = ring_with_slot(p)
 owned = np.arange(n) < imap.size_local
 vents = PocketVents(comm, cells, imap.local_to_global(np.arange(n, dtype=np.int32)), owned,

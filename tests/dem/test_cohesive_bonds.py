@@ -184,7 +184,7 @@ def test_bond_report_ranks_points_by_the_largest_traction_they_carried(tmp_path,
     from fcm_fsi.config import load_case
     from fcm_fsi.dem.cohesive import shape_g
     from fcm_fsi.dem.model import build_system
-    case_path = Path(__file__).resolve().parents[1] / "cases" / "bonded_wall_surge.yaml"
+    case_path = Path(__file__).resolve().parents[2] / "cases" / "bonded_wall_surge.yaml"
     system = build_system(load_case(case_path).dem)
     bonds = next(it for it in system.interactions if hasattr(it, "broken_bonds"))
     lam = np.zeros(bonds.n_points)
