@@ -41,8 +41,10 @@ def test_rotating_sphere_quick_on_two_ranks_writes_metrics_plot_and_report(tmp_p
     assert "## rotating_sphere" in report and "rotating_sphere__rotating_sphere.png" in report
 
 
-@pytest.mark.parametrize("name", ["rotating_cylinder", "zalesak_disk", "dam_break"])
+@pytest.mark.parametrize("name", ["rotating_cylinder", pytest.param("zalesak_disk", marks=pytest.mark.slow), "dam_break"])
 def test_phase_field_quick_levels_pass(name, tmp_path):
+    """The quick level of each case passes and draws its plot. zalesak_disk (≈ 50 s) is `slow`:
+    `python -m fcm_fsi verify zalesak_disk --level quick` runs the same check."""
     res = run_verify([name, "--level", "quick", "--out", str(tmp_path)])
     assert res.returncode == 0, res.stdout + res.stderr
     assert list((tmp_path / name).glob("*.png"))
