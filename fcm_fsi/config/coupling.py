@@ -100,8 +100,9 @@ class CouplingConfig:
     iterations: int = param(
         1, doc="passes of the fluid ⇄ DEM fixed-point iteration per fluid step: 1 = explicit (staggered); > 1 "
                "retakes the step from the same start, the fluid's wall velocity being the blocks' motion from the "
-               "last pass as `wall_velocity` and `wall_motion` define it (updated by `iteration_method`), until `iteration_tol` (implicit coupling: the "
-               "added mass drops out of the stability condition; each pass costs one fluid step)", ge=1, le=50)
+               "last pass as `wall_velocity` and `wall_motion` define it (updated by `iteration_method`), until "
+               "`iteration_tol` (implicit coupling: the added mass drops out of the stability condition; each pass "
+               "costs one fluid step)", ge=1, le=50)
     iteration_tol: float = param(1.0e-3, doc="converged when max |Δv| (ω × radius of gyration for rotations) ≤ this × "
                                              "max(max |v|, iteration_velocity)", gt=0, lt=1)
     iteration_velocity: float = param(1.0e-2, unit="m/s", doc="velocity scale floor of iteration_tol (blocks at rest)",

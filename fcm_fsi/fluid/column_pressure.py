@@ -230,7 +230,7 @@ class ColumnPressure:
             ok = valid[idx] & np.isfinite(v)
             stencil.append((w, v, ok, ok & wet[idx, nearest]))
         any_wet = np.zeros(n, bool)
-        for w, v, ok, ok_wet in stencil:
+        for w, _, _, ok_wet in stencil:
             any_wet |= ok_wet & (w > 0)
         acc, wsum = np.zeros(n), np.zeros(n)
         for w, v, ok, ok_wet in stencil:

@@ -50,8 +50,14 @@ from petsc4py import PETSc
 
 from ..config.case import Case
 from ..config.loader import ConfigError
-from ..coupling.dem_side import (DEMSubcycler, fluid_gyration_ratio, fluid_thickness, fluid_volume_ratio, gap_walls,
-                                 shapes_of_blocks)
+from ..coupling.dem_side import (
+    DEMSubcycler,
+    fluid_gyration_ratio,
+    fluid_thickness,
+    fluid_volume_ratio,
+    gap_walls,
+    shapes_of_blocks,
+)
 from ..coupling.fixed_point import accelerator
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain, cut_cells

@@ -6,15 +6,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import yaml
 from mpi4py import MPI
 
 from fcm_fsi.config import case_from_dict
-from fcm_fsi.fcm.hidden import (body_samples, chain_conductance, hidden_pressure, interpolate_hidden,
-                                perimeter_samples, radius_conductance, surface_samples)
+from fcm_fsi.fcm.hidden import (
+    body_samples,
+    chain_conductance,
+    hidden_pressure,
+    interpolate_hidden,
+    perimeter_samples,
+    radius_conductance,
+    surface_samples,
+)
 from fcm_fsi.fcm.levelset import BOX, CYLINDER, SPHERE, Shapes
-
-from tests.conftest import run_cli
 from tests.simulation.test_coupled import series_on_one_and_two_ranks, sliding_pocket_case
 
 RHO, G = 998.2, 9.81
@@ -59,7 +63,7 @@ def test_hidden_runs_are_linear_in_arc_length_between_their_mouths():
     """A run wrapping round the curve's start and one inside: linear between the wetted
     samples either side (NumPy reference written out); all hidden gives NaN, none the input."""
     ds = np.array([1.0, 2.0, 1.0, 1.0, 3.0, 1.0, 2.0, 1.0])
-    s = np.cumsum(ds) - 0.5 * ds                       # 0.5 2 3.5 4.5 6.5 8.5 10 11.5; total 12
+    # sample midpoints at arc length 0.5 2 3.5 4.5 6.5 8.5 10 11.5 (total 12)
     p = np.array([0.0, 10.0, 0.0, 0.0, 40.0, 0.0, 70.0, 0.0])
     hidden = np.array([True, False, True, True, False, False, False, True])
     out = interpolate_hidden(hidden, p, chain_conductance(ds))
@@ -259,6 +263,7 @@ def test_verify_buoyancy_quick_level_passes(tmp_path):
     """``verify buoyancy --level quick``: the 2D lying, tilted, stacked and clumped bodies within
     1 % of Archimedes at 5 mm cells, the 3D lying and tilted blocks at 7 mm."""
     import json
+
     from tests.verify.test_verify_phase_field import run_verify
     res = run_verify(["buoyancy", "--level", "quick", "--out", str(tmp_path)])
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
