@@ -414,8 +414,10 @@ class HiddenSurface:
                 solid: np.ndarray, filled: np.ndarray, bridged: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(len(functions), n) values at ``points`` (n, 3) on every rank, NaN outside the
         mesh, and per point whether the fluid does not reach it: outside the mesh, every cell
-        containing it solid (``solid``, local cells: no vertex in the fluid), or a cell
-        containing it cut and giving its load to others than the point's ``body``
+        containing it solid (``solid``, local cells: no vertex in the fluid; for the points
+        flagged ``bridged``, near a clump's crease, only solid cells with a vertex the fill sets,
+        ``filled``), or a cell containing it cut and giving its load to others than the point's
+        ``body``
         (``cut_owner`` (local cells, 2): owner and second owner of each cut cell's load,
         NOT_CUT for the cells Γ does not cut). Owned cells only, summed over the ranks: the
         same on any partition."""

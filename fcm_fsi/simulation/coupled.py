@@ -897,10 +897,12 @@ class CoupledModel:
 
     def _column_pressure(self):
         """The local static pressure (fluid/column_pressure.py) for ``hidden_pressure:
-        hydrostatic``: the pressure at the top of the vertical through a node plus the weight of
-        the fluid below it, at the nodes of the cut cells and their neighbours (every cell that
-        holds a surface sample or a share of the fill's surface), the fluid's pressure elsewhere
-        (never used). P1, in the gauge of the fluid's pressure."""
+        hydrostatic``: the pressure at the top of the vertical plus the weight of the fluid
+        below, read 1.5 h_min out in the open fluid (:meth:`_off_the_bodies`) and moved
+        hydrostatically back to each node, at the nodes of the cells with a vertex in a body and
+        three rings of cells round them (every cell that holds a surface sample, a share of Γ or
+        a hidden sample's probe), the fluid's pressure elsewhere (never used). P1, in the gauge
+        of the fluid's pressure."""
         out = self._p_column
         out.x.array[:] = self.fluid.p_out.x.array
         geo = self.cut.geom_cells
