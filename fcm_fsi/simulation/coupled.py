@@ -502,6 +502,7 @@ class CoupledModel:
         if self.hidden is not None:
             # where the fill (or a neighbour) sets the level set: the plain one minus it, > 0
             plain, _ = self._plain_levelset.evaluate(self.points, st.pos, st.quat)
+            self._plain_at_points = plain                 # [m] the bodies' level set without the fill
             filled = plain - level > self._fill_eps
             self._hidden_share(level, filled)
             self._filled_cell = filled[self.cut.geom_cells].any(axis=1)
@@ -916,7 +917,7 @@ class CoupledModel:
         nodes = np.flatnonzero(near)
         density = self.case.fluid.density if self.case.phase_field is None else self._rho_node
         x = self.points[nodes]
-        y = self._off_the_bodies(x, HIDDEN_PROBE * self.h_min)
+        y = self._off_the_bodies(x, self._plain_at_points[nodes], HIDDEN_PROBE * self.h_min)
         P, rho = self._column.values(y, self.fluid.p_out, density, self.cut.level_set, with_density=True)
         g = np.zeros(3)
         g[: self.gdim] = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
@@ -927,14 +928,14 @@ class CoupledModel:
         out.x.array[self._column_of_node[nodes]] = np.nan_to_num(moved)
         return out
 
-    def _off_the_bodies(self, x: np.ndarray, distance: float) -> np.ndarray:
-        """Points ``x`` (n, 3) moved along the gradient of the bodies' level set (no fill) to
-        ``distance`` [m] from the nearest body, where they are closer: the open fluid next to a
-        surface, whose static pressure the nodes of its cut cells take (next to a wall the
-        phase field hugs the wall and the columns through it carry its contents)."""
+    def _off_the_bodies(self, x: np.ndarray, d: np.ndarray, distance: float) -> np.ndarray:
+        """Points ``x`` (n, 3), at ``d`` [m] in the bodies' level set without the fill (as the
+        last cut rebuild evaluated it), moved along its gradient to ``distance`` [m] from the
+        nearest body, where they are closer: the open fluid next to a surface, whose static
+        pressure the nodes of its cut cells take (next to a wall the phase field hugs the wall
+        and the columns through it carry its contents)."""
         st = self.system.state
         ls = self._plain_levelset
-        d, _ = ls.evaluate(x, st.pos, st.quat)
         eps = 1e-3 * self.h_min
         grad = np.zeros_like(x)
         for i in range(self.gdim):
