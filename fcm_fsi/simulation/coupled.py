@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 import ufl
-from dolfinx import fem, la
+from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -59,12 +59,11 @@ from ..coupling.dem_side import (
     shapes_of_blocks,
 )
 from ..coupling.fixed_point import accelerator
+from ..coupling.hidden_load import HiddenLoad, or_over_ranks
 from ..dem.model import build_system
-from ..fcm.domain import CutDomain, cut_cells
-from ..fcm.hidden import NOT_CUT, HiddenSurface
+from ..fcm.domain import CutDomain
 from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
 from ..fcm.pockets import PocketVents
-from ..fluid.column_pressure import ColumnPressure
 from ..fluid.navier_stokes import quadrature_degree
 from ..fluid.solvers import LinearSolveError
 from ..fluid.tagged_form import TaggedForm
@@ -78,14 +77,6 @@ from .two_phase import property_map
 THIN_WALL = 1.25
 
 log = get_logger("coupled")
-
-#: sample spacing of the hidden-surface pressure (fcm/hidden.py) × h_min, by fluid dimension: a
-#: hidden patch's edge is placed to one sample, so its load is off by ≈ p × (perimeter × spacing)
-HIDDEN_SPACING = {2: 1.0 / 16, 3: 1.0 / 4}
-
-#: how far out [× h_min] a hidden sample looks for open fluid (fcm/hidden.py): beyond the gap
-#: fill, whose width is h_min
-HIDDEN_PROBE = 1.5
 
 #: blocks whose pose/velocity/load columns go into series.csv (all blocks: bodies.csv)
 SERIES_BLOCKS = 4
@@ -170,34 +161,13 @@ class CoupledModel:
             if cp.drain_pockets:
                 self._q_of_node = self.cut.node_map(self.ns.Q)          # mesh vertex → pressure node
                 self._p_pocket = fem.Function(self.ns.Q, name="p_pocket")
-        self.hidden = None                 # coupling.hidden_pressure (fcm/hidden.py)
-        self.hidden_force, self.hidden_torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
-        self.fill_force, self.fill_torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
+        self.hidden = None                 # coupling.hidden_pressure (coupling/hidden_load.py)
         if cp.hidden_pressure != "none":
-            key = f"key 'coupling.hidden_pressure' = {cp.hidden_pressure}"
-            try:
-                # every body, fixed ones too: the static load on Γ comes off all of them
-                self.hidden = HiddenSurface(self.mesh, self.levelset.shapes, self.nb,
-                                            self.h_min * HIDDEN_SPACING[self.gdim], bridge=self.h_min,
-                                            probe=HIDDEN_PROBE * self.h_min)
-                self._unit_weight = fem.Constant(self.mesh, PETSc.ScalarType(1.0))
-            except ValueError as err:
-                raise ConfigError(f"{key}: {err}") from None
-            self._column = None
-            if cp.hidden_pressure == "hydrostatic":
-                g = np.asarray(case.fluid.gravity, float)[: self.gdim]
-                self._column = ColumnPressure(self.mesh, g, self.h_min)
-                self._p_column = fem.Function(self.fluid.p_out.function_space, name="p_column")
-                self._column_of_node = self.cut.node_map(self._p_column.function_space)
-                if self.vents is None:
-                    self._node_flags = fem.Function(self.cut.S1)
-            self._rho_node = fem.Function(self.cut.S1, name="rho_node")
-            # χ (P1): 1 at every vertex of a cut cell in which the fill (or a neighbour) sets
-            # the level set, 0 elsewhere: where the body's surface samples are hidden (_hidden_share)
-            self._fill_eps = 1e-6 * self.h_min   # [m] above round-off of the two level sets' difference
-            self._fill_weight = fem.Function(self.cut.S1, name="hidden_share")
             if self._plain_levelset is None:
                 self._plain_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band)
+            self.hidden = HiddenLoad(cp.hidden_pressure, self.cut, self._plain_levelset, self.levelset.shapes,
+                                     self.nb, self.fluid.p_out.function_space, self.points,
+                                     np.asarray(case.fluid.gravity, float), self.h_min, self.depth)
         self.v_of_node = self.cut.node_map(self.ns.V)     # mesh vertex → NS velocity node
         nv = self.ns.V.dofmap.index_map.size_local + self.ns.V.dofmap.index_map.num_ghosts
         self.v_fluid = np.ones(nv, bool)
@@ -499,23 +469,12 @@ class CoupledModel:
             if drained is not None:
                 self._drain_pockets(*drained)
         ubar, share = self._wall_velocity_at_nodes(owner, velocities)
-        if self.hidden is not None:
-            # where the fill (or a neighbour) sets the level set: the plain one minus it, > 0
-            plain, _ = self._plain_levelset.evaluate(self.points, st.pos, st.quat)
-            self._plain_at_points = plain                 # [m] the bodies' level set without the fill
-            filled = plain - level > self._fill_eps
-            self._hidden_share(level, filled)
-            self._filled_cell = filled[self.cut.geom_cells].any(axis=1)
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         stats = self.cut.update(level, owner, ubar, share)
         self._pass_cut = (owner, stats)
         if self.hidden is not None:
-            cut = cut_cells(level[self.cut.geom_cells])
-            self._cut_owner = np.column_stack([np.where(cut, self.cut.cell_owner, NOT_CUT),
-                                               np.where(cut & (self.cut.cell_share > 0), self.cut.cell_second,
-                                                        NOT_CUT)])
-            self._solid_cell = level[self.cut.geom_cells].max(axis=1) < 0
+            self.hidden.rebuild(level, st.pos, st.quat)
         if self._advective_dofs is not None:
             # φ in advective form on the cells at and inside the blocks (phase_field_residual)
             cells = self.cut.body_cells if self._pocket_cells is None else self.cut.body_cells | self._pocket_cells
@@ -630,12 +589,7 @@ class CoupledModel:
 
     def _any_rank(self, flags: np.ndarray) -> np.ndarray:
         """Per-node flags (mesh vertex order) or-ed over the ranks that hold each node."""
-        x = self._node_flags.x
-        x.array[:] = 0.0
-        x.array[self.cut.level_dofs] = flags
-        x.scatter_reverse(la.ScatterMode.add)
-        x.scatter_forward()
-        return x.array[self.cut.level_dofs] > 0
+        return or_over_ranks(self._node_flags, self.cut.level_dofs, flags)
 
     def _shared_ownership(self, owner: np.ndarray, motion, ubar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``coupling.load_split: shared``: at each node the nearest other block (second owner)
@@ -834,7 +788,8 @@ class CoupledModel:
                           t, cp.iterations, self.iteration_residual)
         # coupling.hidden_pressure: the hidden-surface load is not the fluid's (its reaction is the floor's)
         # and the fill's surface load (the fluid's) is not the block's: the check compares the fluid's own
-        fluid_load = self.force - self.hidden_force + self.fill_force
+        fluid_load = self.force if self.hidden is None else \
+            self.force - self.hidden.surface_force + self.hidden.cut_force
         self.exchange_error = self._exchange_error(dt, F - fluid_load, fluid_side)
         self._check_dem(t + dt)
         if self.ns.step_count % self.case.coupling.check_every == 0:
@@ -858,8 +813,6 @@ class CoupledModel:
             self.torque[:] = torque * self.depth
             if self.hidden is not None:
                 self._hidden_load(centres)
-                self.force += self.hidden_force - self.fill_force
-                self.torque += self.hidden_torque - self.fill_torque
             fluid_side = self._wall_momentum()
             self._update_added_mass(same_poses=retake)
         with timer("dem sub-steps"):
@@ -881,95 +834,17 @@ class CoupledModel:
             self.alpha_ang[:] = (w1 - w0) / dt
         return F, fluid_side
 
-    def _hidden_share(self, level: np.ndarray, filled: np.ndarray) -> None:
-        """χ of ``coupling.hidden_pressure`` from the level set at the mesh vertices and where the
-        fill sets it (``filled``): 1 at every vertex of a cut cell with such a vertex (assembled
-        over the ranks, so that a vertex sees all its cells), P1 between: a surface sample where
-        χ = 1 is hidden (fcm/hidden.py)."""
-        geo = self.cut.geom_cells
-        cells = geo[cut_cells(level[geo]) & filled[geo].any(axis=1)]
-        touched = np.zeros(len(filled))
-        touched[cells.ravel()] = 1.0
-        chi = self._fill_weight
-        chi.x.array[self.cut.level_dofs] = touched
-        chi.vector.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        chi.x.array[:] = chi.x.array > 0
-        chi.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-
-    def _column_pressure(self):
-        """The local static pressure (fluid/column_pressure.py) for ``hidden_pressure:
-        hydrostatic``: the pressure at the top of the vertical plus the weight of the fluid
-        below, read 1.5 h_min out in the open fluid (:meth:`_off_the_bodies`) and moved
-        hydrostatically back to each node, at the nodes of the cells with a vertex in a body and
-        three rings of cells round them (every cell that holds a surface sample, a share of Γ or
-        a hidden sample's probe), the fluid's pressure elsewhere (never used). P1, in the gauge
-        of the fluid's pressure."""
-        out = self._p_column
-        out.x.array[:] = self.fluid.p_out.x.array
-        geo = self.cut.geom_cells
-        level = self.cut.level_set.x.array[self.cut.level_dofs]    # at self.points, as last built
-        near = np.zeros(len(self.points), bool)
-        near[geo[level[geo].min(axis=1) < 0]] = True
-        near = self._any_rank(near)
-        for _ in range(3):                                        # and three rings round them
-            near[geo[near[geo].any(axis=1)]] = True
-            near = self._any_rank(near)
-        nodes = np.flatnonzero(near)
-        density = self.case.fluid.density if self.case.phase_field is None else self._rho_node
-        x = self.points[nodes]
-        y = self._off_the_bodies(x, self._plain_at_points[nodes], HIDDEN_PROBE * self.h_min)
-        P, rho = self._column.values(y, self.fluid.p_out, density, self.cut.level_set, with_density=True)
-        g = np.zeros(3)
-        g[: self.gdim] = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
-        moved = P + rho * ((x - y) @ g)                           # hydrostatically back to the node
-        bad = ~np.isfinite(moved)
-        if bad.any():                                             # the offset point left the mesh
-            moved[bad] = self._column.values(x[bad], self.fluid.p_out, density, self.cut.level_set)
-        out.x.array[self._column_of_node[nodes]] = np.nan_to_num(moved)
-        return out
-
-    def _off_the_bodies(self, x: np.ndarray, d: np.ndarray, distance: float) -> np.ndarray:
-        """Points ``x`` (n, 3), at ``d`` [m] in the bodies' level set without the fill (as the
-        last cut rebuild evaluated it), moved along its gradient to ``distance`` [m] from the
-        nearest body, where they are closer: the open fluid next to a surface, whose static
-        pressure the nodes of its cut cells take (next to a wall the phase field hugs the wall
-        and the columns through it carry its contents)."""
-        st = self.system.state
-        ls = self._plain_levelset
-        eps = 1e-3 * self.h_min
-        grad = np.zeros_like(x)
-        for i in range(self.gdim):
-            e = np.zeros(3)
-            e[i] = eps
-            grad[:, i] = (ls.evaluate(x + e, st.pos, st.quat)[0] - ls.evaluate(x - e, st.pos, st.quat)[0]) / (2 * eps)
-        norm = np.linalg.norm(grad, axis=1)
-        n = np.where(norm[:, None] > 0.5, grad / np.maximum(norm, 1e-300)[:, None], 0.0)
-        return x + np.maximum(distance - d, 0.0)[:, None] * n
-
     def _hidden_load(self, centres: np.ndarray) -> None:
-        """``coupling.hidden_pressure`` (fcm/hidden.py), from this step's pressure and cut: the
-        static pressure's load on the cut surface (``fill_force``, ``fill_torque``, taken off the
-        body) and on the samples of the body's true surface, the hidden ones by the gap's
-        interpolation (``hidden_force``, ``hidden_torque``, added) [N, N m] per block; the
-        static pressure is the local one of :meth:`_column_pressure` (``hydrostatic``) or the
-        whole pressure (``linear``)."""
-        density = self.case.fluid.density
-        if self.case.phase_field is not None:
-            self._rho_node.x.array[self.cut.level_dofs] = self._node_density()
-            density = self._rho_node
-        pressure = self.fluid.p_out if self._column is None else self._column_pressure()   # this step's P1
+        """``coupling.hidden_pressure``: the block's load becomes the fluid's on Γ minus the
+        static pressure's on Γ plus the static pressure's on the true surface (coupling/hidden_load.py)."""
         st = self.system.state
-        g = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
-        self.hidden_force, self.hidden_torque = self.hidden.load(
-            self._fill_weight, pressure, density, g, self._cut_owner, self._solid_cell, self._filled_cell, st.pos,
-            st.rotation_matrices(), self.depth)
-        force, torque = self.cut.pressure_load(self.nb, centres, pressure, self._unit_weight)
-        self.fill_force[:] = 0.0
-        self.fill_force[:, : self.gdim] = force * self.depth
-        self.fill_torque[:] = torque * self.depth
-        if self.hidden.unreached:
-            log.debug("hidden pressure: %d block(s) hidden all round (no wetted mouth): no hidden load",
-                      self.hidden.unreached)
+        density = self.case.fluid.density if self.case.phase_field is None else self._node_density()
+        h = self.hidden
+        h.exchange(self.fluid.p_out, density, st.pos, st.rotation_matrices(), centres)
+        self.force += h.surface_force - h.cut_force
+        self.torque += h.surface_torque - h.cut_torque
+        if h.unreached:
+            log.debug("hidden pressure: %d block(s) hidden all round (no wetted mouth): no hidden load", h.unreached)
 
     def _block_velocities(self) -> np.ndarray:
         """The iterated unknown [m/s], flattened: per block the V and Ω × radius of gyration of
@@ -1084,7 +959,8 @@ class CoupledModel:
                      "vented_nodes": float(self.vents.vented_nodes if self.vents else 0),
                      "drained_nodes": float(self.vents.drained_nodes if self.vents else 0)})
         if self.hidden is not None:
-            diag.update({f"hidden_force_{c}": float(self.hidden_force[:, k].sum()) for k, c in enumerate("xyz"[: self.gdim])})
+            diag.update({f"hidden_force_{c}": float(self.hidden.surface_force[:, k].sum())
+                         for k, c in enumerate("xyz"[: self.gdim])})
             diag["hidden_length" if self.gdim == 2 else "hidden_area"] = float(self.hidden.hidden_measure.sum())
         total = self.force.sum(axis=0)
         diag.update({"force_x": total[0], "force_y": total[1], "force_z": total[2]})
