@@ -50,6 +50,7 @@ from petsc4py import PETSc
 
 from ..config.case import Case
 from ..config.loader import ConfigError
+from ..coupling.body_output import BodyOutput
 from ..coupling.dem_side import (
     DEMSubcycler,
     fluid_gyration_ratio,
@@ -229,41 +230,13 @@ class CoupledModel:
             self.liquid0 = self._liquid_volume_fluid()
         if self.bonds is not None:
             self.series_units["broken_bonds"] = "-"
-        self.bodies_csv = None
-        if out_dir is not None:
-            from ..io.csv import TimeSeriesCSV
-            cols = {"t": "s", "block": "-"}
-            for key, unit in (("x", "m"), ("y", "m"), ("z", "m"), ("qw", "-"), ("qx", "-"), ("qy", "-"),
-                              ("qz", "-"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"), ("wx", "rad/s"),
-                              ("wy", "rad/s"), ("wz", "rad/s"), ("fx", "N"), ("fy", "N"), ("fz", "N"),
-                              ("tx", "N m"), ("ty", "N m"), ("tz", "N m")):
-                cols[key] = unit
-            self.bodies_csv = TimeSeriesCSV(Path(out_dir) / "bodies.csv", cols, comm.rank, lazy=True)
+        self.output = BodyOutput(case, self.nb, self.bonds, out_dir, comm.rank)   # bodies.csv, bond breaks, VTP
         self.added_mass_csv = None
         if out_dir is not None and self._added_mass_from_flow() and case.coupling.added_mass > 0:
             from ..io.csv import TimeSeriesCSV
             self.added_mass_csv = TimeSeriesCSV(Path(out_dir) / "added_mass.csv",
                                                 {"t": "s", "block": "-", "m_tilde": "kg", "i_tilde": "kg m^2",
                                                  "solves": "-"}, comm.rank, lazy=True)
-        self.breaks_csv = None
-        if out_dir is not None and self.bonds is not None:
-            from ..io.csv import TimeSeriesCSV
-            self.breaks_csv = TimeSeriesCSV(Path(out_dir) / "bond_breaks.csv",
-                                            {"t": "s", "bond": "-", "block_a": "-", "block_b": "-"}, comm.rank,
-                                            lazy=True)
-            self._broken_before = self.bonds.broken_bonds()
-        # member_loads.csv: per member of a building, the largest traction / σ_c its bonds carried so far
-        self.members, self.members_csv = None, None
-        if out_dir is not None and self.bonds is not None and case.dem.structure is not None:
-            from ..dem.failure_sequence import block_members
-            from ..io.csv import TimeSeriesCSV
-            self.members = block_members(case)
-            self.members_csv = TimeSeriesCSV(Path(out_dir) / "member_loads.csv",
-                                             {"t": "s", **{member_column(m): "sigma_c" for m in sorted(set(self.members))}},
-                                             comm.rank, lazy=True)
-        # the blocks for ParaView: blocks_NNNNN.vtp + blocks.pvd at every field output
-        self.blocks_dir = Path(out_dir) if out_dir is not None and case.output.xdmf else None
-        self.blocks_pvd: list[tuple[float, str]] = []
         log.info("coupled: %d blocks, %d spheres; DEM dt %.4g s; level-set band %.4g m, gap fill %.4g m "
                  "(%d walls); cut cells %d, smallest cut fraction %.2e", self.nb, st.ns, self.system.dt, self.band,
                  self.gap, len(self.levelset.walls), self.stats.cut_cells, self.stats.min_cut_fraction)
@@ -794,9 +767,7 @@ class CoupledModel:
         self._check_dem(t + dt)
         if self.ns.step_count % self.case.coupling.check_every == 0:
             self.dem.check_replicated(self.comm)
-        self._write_bodies(t + dt)
-        self._record_bond_breaks(t + dt)
-        self._record_member_loads(t + dt)
+        self.output.step(t + dt, self.system.state, self.force, self.torque)
 
     def _fluid_then_dem(self, t: float, dt: float, timer: StageTimer, retake: bool = False):
         """Fluid step on the current cut, the exchange, and the DEM sub-steps; returns the
@@ -858,28 +829,6 @@ class CoupledModel:
         _, V, W = self._wall_motion()
         return np.concatenate([V, W * self.gyration[:, None]]).ravel()
 
-    def _record_bond_breaks(self, t: float) -> None:
-        """Append the bonds that broke during this step to ``bond_breaks.csv`` (time, bond,
-        its two blocks): the failure sequence of a structure."""
-        if self.bonds is None or self.breaks_csv is None:
-            return
-        now = self.bonds.broken_bonds()
-        new = np.flatnonzero(now & ~self._broken_before)
-        self._broken_before = now
-        for bond in new:
-            p = np.flatnonzero(self.bonds.pt_bond == bond)[0]
-            self.breaks_csv.write(t=t, bond=bond, block_a=self.bonds.pt_a[p], block_b=self.bonds.pt_b[p])
-
-    def _record_member_loads(self, t: float) -> None:
-        """Append to ``member_loads.csv`` each building member's largest traction / σ_c so far
-        (:func:`fcm_fsi.dem.bond_report.member_peak_tractions`: 1 once a bond point of the member
-        reached its strength): how close each wall, column and slab came to failing, and when."""
-        if self.members_csv is None:
-            return
-        from ..dem.bond_report import member_peak_tractions
-        peaks = member_peak_tractions(self.bonds, self.bonds.lam_max, self.bonds.broken, self.members)
-        self.members_csv.write(t=t, **{member_column(m): v for m, v in peaks.items()})
-
     def _exchange_error(self, dt: float, stabilisation: np.ndarray, fluid_side: np.ndarray) -> float:
         """|fluid impulse the DEM integrated + momentum the fluid received| / scale, the
         added-mass stabilisation taken out; the linear force mode compares trapezoids."""
@@ -906,22 +855,6 @@ class CoupledModel:
                 f": fluid force {np.array2string(self.force[b], precision=4)} N, velocity "
                 f"{np.array2string(st.vel[b], precision=4)} m/s, DEM dt/Δt_cr {self.dem.last.dt_over_dt_cr:.3f}, "
                 f"fluid dt {self.fluid.last_dt:.4g} s (band {self.band:.4g} m)")
-
-    def _write_bodies(self, t: float) -> None:
-        if self.bodies_csv is None:
-            return
-        st = self.system.state
-        for b in range(self.nb):
-            row = {"t": t, "block": b}
-            for k, key in enumerate("xyz"):
-                row[key] = st.pos[b, k]
-                row[f"v{key}"] = st.vel[b, k]
-                row[f"w{key}"] = st.omega[b, k]
-                row[f"f{key}"] = self.force[b, k]
-                row[f"t{key}"] = self.torque[b, k]
-            for k, key in enumerate(("qw", "qx", "qy", "qz")):
-                row[key] = st.quat[b, k]
-            self.bodies_csv.write(**row)
 
     # ------------------------------------------------------- loop protocol
     @property
@@ -1095,34 +1028,14 @@ class CoupledModel:
         return fields, globals_
 
     def write_output(self, t: float) -> None:
-        """The blocks at a field output (rank 0): ``blocks_NNNNN.vtp`` with every sphere's
-        radius, block, velocity and its block's ``damage`` (fraction of its bonds broken),
-        listed with its time in ``blocks.pvd`` — opens in ParaView beside ``fields.xdmf``."""
-        if self.blocks_dir is None or self.comm.rank != 0:
-            return
-        from ..dem.output import write_pvd, write_vtp
-        st = self.system.state
-        damage = (self.bonds.block_damage(self.nb) if self.bonds is not None else np.zeros(self.nb))
-        name = f"blocks_{len(self.blocks_pvd):05d}.vtp"
-        write_vtp(self.blocks_dir / name, st, {"damage": damage[st.sph_block]})
-        self.blocks_pvd.append((float(t), name))
-        write_pvd(self.blocks_dir / "blocks.pvd", self.blocks_pvd)
+        """The blocks at a field output (coupling/body_output.py)."""
+        self.output.fields(t, self.system.state)
 
     def load_state(self, checkpoint) -> None:
         self.fluid.load_state(checkpoint)
         self.load_dem_arrays(checkpoint.globals)
-        if self.blocks_dir is not None:                    # the collection continues from the checkpoint
-            from ..dem.output import read_pvd
-            self.blocks_pvd = read_pvd(self.blocks_dir / "blocks.pvd", checkpoint.time)
-        for csv in (self.bodies_csv, self.breaks_csv, self.added_mass_csv, self.members_csv):   # continue the earlier run's files
-            if csv is not None:
-                csv.resume(checkpoint.time)
-        if self.bonds is not None:                         # bonds broken before the checkpoint are not new
-            self._broken_before = self.bonds.broken_bonds()
+        self.output.resume(checkpoint.time)                # continue the earlier run's files
+        if self.added_mass_csv is not None:
+            self.added_mass_csv.resume(checkpoint.time)
         self.stats = self.rebuild_cut()
 
-
-def member_column(member: str) -> str:
-    """The ``member_loads.csv`` column of a building member: its name with ``_`` for spaces
-    (``wall xmax s0`` → ``wall_xmax_s0``)."""
-    return member.replace(" ", "_")
