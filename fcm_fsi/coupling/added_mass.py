@@ -31,6 +31,8 @@ solves per moving body or cluster.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import ufl
 from dolfinx import fem
@@ -181,3 +183,191 @@ class PotentialAddedMass:
 def largest_eigenvalue(sym: np.ndarray) -> np.ndarray:
     """Largest eigenvalue of each symmetric matrix in the stack (…, n, n), ≥ 0."""
     return np.maximum(np.linalg.eigvalsh(sym)[..., -1], 0.0)
+
+
+class AddedMassStage:
+    """The added-mass stabilisation of the explicit coupling (module docstring of
+    ``simulation.coupled``): per block m̃ (raising the DEM mass) and Ĩ (its inertia), set
+    every step, and the lagged load m̃ aⁿ − m̃ g (+ R Ĩ Rᵀ αⁿ) the DEM gets on top of the
+    fluid's (relaxed) load. Owns the blocks' own mass and inertia, the last step's
+    accelerations and the relaxed load. ``system`` the DEM system, ``cut`` the cut domain,
+    ``rho`` the fluid density field (a Function or Constant), ``natural_facets`` the fluid's
+    open boundaries, ``depth`` [m] the span of a 2D fluid (1 in 3D); ``volume_ratio``,
+    ``gyration_ratio`` (nb,) the fluid-seen shape's volume and squared radius of gyration over
+    the block's own (``coupling.min_thickness``). With the flow's added mass and ``out_dir``,
+    rank 0 writes ``added_mass.csv`` (t, block, m̃, the largest Ĩ, solves)."""
+
+    def __init__(self, case, system, cut, rho, natural_facets, gdim: int, depth: float,
+                 volume_ratio: np.ndarray, gyration_ratio: np.ndarray, out_dir=None, rank: int = 0) -> None:
+        self.case, self.system, self.cut, self.rho = case, system, cut, rho
+        self.natural_facets, self.gdim, self.depth = natural_facets, gdim, depth
+        cp = case.coupling
+        self.factor, self.model, self.relaxation = cp.added_mass, cp.added_mass_model, cp.force_relaxation
+        st = system.state
+        self.nb = st.nb
+        self.mass0, self.inertia0 = st.mass.copy(), st.inertia.copy()
+        dens = np.array([m.density for m in case.dem.materials])
+        #: V_b, the block's volume as the fluid sees it (m_b/ρ_material × the min_thickness widening)
+        self.volume_b = st.mass / dens[st.sph_material[st.blk_sph_start[:-1]]] * volume_ratio
+        with np.errstate(invalid="ignore", divide="ignore"):   # fixed blocks: no added mass
+            k2 = self.inertia0 / self.mass0[:, None] * gyration_ratio
+        self.gyration_sq = np.where(np.isfinite(k2), k2, 0.0)
+        self.added_mass = np.zeros(self.nb)          # m̃ per block, set every step
+        self.added_inertia = np.zeros((self.nb, 3))   # Ĩ per block (body axes)
+        self.added_tensor = None                      # (nb, 3, 3) M̃ per block (added_mass_model: tensor)
+        self._potential = None                        # added_mass_model: potential (built at first use)
+        self._flow_added_mass = None                  # the last flow-computed result (a step's passes share it)
+        self.accel = np.zeros((self.nb, 3))           # a and α of the last fluid step
+        self.alpha = np.zeros((self.nb, 3))
+        self.relaxed_load = np.zeros((2 * self.nb, 3))   # force; torque applied last step (force_relaxation)
+        self.csv = None
+        if out_dir is not None and self.from_flow and self.factor > 0:
+            from ..io.csv import TimeSeriesCSV
+            self.csv = TimeSeriesCSV(Path(out_dir) / "added_mass.csv", {"t": "s", "block": "-", "m_tilde": "kg",
+                                                                        "i_tilde": "kg m^2", "solves": "-"},
+                                     rank, lazy=True)
+
+    @property
+    def from_flow(self) -> bool:
+        """Whether m̃ comes from the flow's added-mass tensor (``added_mass_model`` potential or tensor)."""
+        return self.model in ("potential", "tensor")
+
+    def update(self, t: float, labels: np.ndarray, same_poses: bool = False) -> None:
+        """m̃_b = C_a ρ̄_b V_b with ρ̄_b the mean fluid density on block b's wetted (cut)
+        surface, so a block in air carries C_a ρ_air V_b, not the water's (with the water's,
+        the lagged m̃ aⁿ term turned floor-contact chatter into a load of several times the
+        weight of a block resting in air); 0 for blocks without cut surface and fixed blocks;
+        or from the flow (:meth:`_potential_added_mass`, ``labels`` the moving groups).
+        Raises the DEM mass and inertia (by Ĩ = m̃ k², k the fluid-seen shape's radius of
+        gyration) for the coming sub-steps. ``same_poses``: a later pass of the implicit
+        coupling, whose flow-computed m̃ is the first pass's (same cut and clusters; φ inside
+        the blocks, which ρ carries into it, moves with each pass's ū: 7e-7 of a block's
+        velocity per step, tests/simulation/test_coupled.py)."""
+        if self.factor == 0.0:
+            return
+        st = self.system.state
+        if self.from_flow:
+            if not same_poses or self._flow_added_mass is None:
+                self._flow_added_mass = self._potential_added_mass(t, labels)
+            extra, extra_inertia, self.added_tensor = self._flow_added_mass
+        else:
+            # (negative fitted surface weights can overshoot a sharp ρ jump slightly: clip at 0)
+            rho_bar = np.maximum(np.nan_to_num(self.cut.wetted_mean(self.nb, self.rho), nan=0.0), 0.0)
+            extra = self.factor * rho_bar * self.volume_b
+            extra[st.fixed] = 0.0
+            extra_inertia = extra[:, None] * self.gyration_sq
+        self.added_mass, self.added_inertia = extra, extra_inertia
+        st.mass[:] = self.mass0 + extra
+        st.inertia[:] = self.inertia0 + extra_inertia
+        if self.added_tensor is not None:
+            # the kick's inverse of m I + M̃ (st.mass = m + λ_min(M̃) carries gravity, the contact
+            # dashpots and Δt_cr: the lightest direction); fixed blocks are not kicked
+            free = ~st.fixed
+            tens = self.added_tensor.copy()
+            tens[free] += self.mass0[free, None, None] * np.eye(3)[None]
+            tens[~free] = np.eye(3)[None]
+            self.system.inv_mass = np.linalg.inv(tens)
+
+    def _potential_added_mass(self, t: float, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``added_mass_model: potential``: m̃ (nb,) [kg] and Ĩ (nb, 3) [kg m²] per block from
+        the added-mass tensor M of each moving group (``labels``: block, or bonded cluster with
+        ``wall_motion: bonded_cluster``) on the current cut (:class:`PotentialAddedMass`):
+        m̃_group = factor × λ_max(M_translation), shared over its blocks by fluid-seen volume;
+        the rotational λ_max(M_rotation) about the group's centre of mass, less what the shared
+        m̃ already gives at the blocks' offsets, shared alike as Ĩ on every axis. Groups
+        holding a fixed block get none. Writes added_mass.csv. ``tensor``: m̃ is factor ×
+        λ_min(M_translation) shared alike, and the third result is each block's share of
+        factor × M_translation (nb, 3, 3) (None with ``potential``)."""
+        st, factor = self.system.state, self.factor
+        if self._potential is None:
+            self._potential = PotentialAddedMass(self.cut, self.rho, self.natural_facets)
+        pot = self._potential
+        groups = [g for g in np.unique(labels) if not st.fixed[labels == g].any()]
+        extra, extra_inertia = np.zeros(self.nb), np.zeros((self.nb, 3))
+        tensor = self.model == "tensor"
+        added_tensor = np.zeros((self.nb, 3, 3)) if tensor else None
+        if not groups:
+            return extra, extra_inertia, added_tensor
+        pot.assemble()
+        ncell = len(self.cut.cell_owner)
+        owner, second, share = self.cut.cell_owner, self.cut.cell_second, self.cut.cell_share
+        weights = np.zeros((len(groups), ncell))
+        centres = np.zeros((len(groups), 3))
+        for i, g in enumerate(groups):
+            inside = labels == g
+            in_first = (owner >= 0) & inside[np.maximum(owner, 0)]
+            in_second = (second >= 0) & inside[np.maximum(second, 0)]
+            weights[i] = np.where(in_first, 1.0 - share, 0.0) + np.where(in_second, share, 0.0)
+            m = self.mass0[inside]
+            centres[i] = (m[:, None] * st.pos[inside]).sum(axis=0) / m.sum()
+        M = pot.tensors(weights, centres) * self.depth
+        d = self.gdim
+        if tensor:   # the translational tensor itself; the scalar part is its smallest eigenvalue
+            m_group = factor * np.maximum(np.linalg.eigvalsh(M[:, :d, :d])[:, 0], 0.0)
+        else:
+            m_group = factor * largest_eigenvalue(M[:, :d, :d])
+        j_group = factor * largest_eigenvalue(M[:, d:, d:])
+        for i, g in enumerate(groups):
+            blocks = np.flatnonzero(labels == g)
+            share_b = self.volume_b[blocks] / self.volume_b[blocks].sum()
+            extra[blocks] = m_group[i] * share_b
+            if tensor:
+                added_tensor[blocks, :d, :d] = factor * share_b[:, None, None] * M[i, :d, :d][None]
+            r = st.pos[blocks] - centres[i]
+            if d == 2:
+                carried = float((extra[blocks] * (r[:, 0] ** 2 + r[:, 1] ** 2)).sum())
+            else:       # about the axis where the shared masses carry least
+                carried = float(min((extra[blocks] * ((r ** 2).sum(axis=1) - r[:, k] ** 2)).sum() for k in range(3)))
+            extra_inertia[blocks] = max(j_group[i] - carried, 0.0) * share_b[:, None]
+        if self.csv is not None:
+            for b in range(self.nb):
+                if extra[b] > 0:
+                    self.csv.write(t=t, block=b, m_tilde=extra[b], i_tilde=extra_inertia[b].max(),
+                                   solves=pot.last_solves)
+        return extra, extra_inertia, added_tensor
+
+    def load(self, force: np.ndarray, torque: np.ndarray, accel: np.ndarray,
+             alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The DEM's load: the fluid's ``force``, ``torque`` (nb, 3) relaxed (ω F + (1 − ω) × the
+        last relaxed load) + m̃ aⁿ − m̃ g and torque + R Ĩ Rᵀ αⁿ, ``accel``, ``alpha`` the
+        accelerations the fluid answers (:attr:`accel`, :attr:`alpha`, or their bonded
+        clusters' rigid parts)."""
+        w = self.relaxation
+        if w < 1.0:
+            self.relaxed_load[:] = w * np.concatenate([force, torque]) + (1.0 - w) * self.relaxed_load
+            force, torque = self.relaxed_load[: self.nb], self.relaxed_load[self.nb:]
+        if not self.added_mass.any() and (self.added_tensor is None or not self.added_tensor.any()):
+            return force.copy(), torque.copy()
+        st = self.system.state
+        g = np.asarray(self.case.dem.gravity)
+        if self.added_tensor is not None:    # M̃ aⁿ − m̃ g (m̃ = λ_min(M̃) is in the DEM's scalar mass)
+            F = force + np.einsum("bij,bj->bi", self.added_tensor, accel) - self.added_mass[:, None] * g[None, :]
+        else:
+            F = force + self.added_mass[:, None] * (accel - g[None, :])
+        R = st.rotation_matrices()
+        body = np.einsum("bji,bj->bi", R, alpha) * self.added_inertia
+        T = torque + np.einsum("bij,bj->bi", R, body)
+        return F, T
+
+    def record(self, v0: np.ndarray, w0: np.ndarray, v1: np.ndarray, w1: np.ndarray, dt: float) -> None:
+        """aⁿ, αⁿ: the change over a fluid step ``dt`` [s] of the wall velocity the fluid got
+        (``v0``, ``w0``) against the one it gets next step (``v1``, ``w1``): what the fluid's
+        added-mass reaction answers, so m̃ aⁿ cancels it."""
+        self.accel[:] = (v1 - v0) / dt
+        self.alpha[:] = (w1 - w0) / dt
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """What it carries between steps (checkpoint globals, retry snapshot)."""
+        return {"coupling__accel": np.concatenate([self.accel, self.alpha]),
+                "coupling__relaxed_load": self.relaxed_load.copy()}
+
+    def resume(self, time: float) -> None:
+        """Continue ``added_mass.csv`` of the run a checkpoint at ``time`` [s] came from."""
+        if self.csv is not None:
+            self.csv.resume(time)
+
+    def load_arrays(self, g: dict[str, np.ndarray]) -> None:
+        """Inverse of :meth:`arrays`."""
+        self.accel[:], self.alpha[:] = g["coupling__accel"][: self.nb], g["coupling__accel"][self.nb:]
+        if "coupling__relaxed_load" in g:
+            self.relaxed_load[:] = g["coupling__relaxed_load"]

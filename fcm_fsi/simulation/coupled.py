@@ -50,6 +50,7 @@ from petsc4py import PETSc
 
 from ..config.case import Case
 from ..config.loader import ConfigError
+from ..coupling.added_mass import AddedMassStage
 from ..coupling.body_output import BodyOutput
 from ..coupling.dem_side import (
     DEMSubcycler,
@@ -120,21 +121,20 @@ class CoupledModel:
         self.dem = DEMSubcycler(self.system)
         self.nb = st.nb
         self.bonds = next((it for it in self.system.interactions if hasattr(it, "broken_bonds")), None)
-        self._remember_own_inertia(case)
-        self.added_mass = np.zeros(self.nb)         # m̃ per block, set every step (_update_added_mass)
-        self.added_inertia = np.zeros((self.nb, 3))  # Ĩ per block (body axes)
-        self.added_tensor = None                     # (nb, 3, 3) M̃ per block (added_mass_model: tensor)
-        self._potential = None                       # added_mass_model: potential (built at first use)
         self._energy_limit = None                    # health(): set at the first check
-        self.accel = np.zeros((self.nb, 3))        # a and α of the last fluid step
-        self.alpha_ang = np.zeros((self.nb, 3))
-        self.relaxed_load = np.zeros((2 * self.nb, 3))   # force; torque applied last step (force_relaxation)
         # radius of gyration [m] (rotations enter the iteration residual as ω × it)
         with np.errstate(divide="ignore", invalid="ignore"):
             g = np.sqrt(st.inertia.sum(axis=1) / (2.0 * st.mass))
         self.gyration = np.where(np.isfinite(g) & (g > 0), g, 1.0)
         self.iterations_done, self.iteration_residual = 1, 0.0
         self.depth = 1.0 if self.gdim == 3 else float(cp.depth)
+        rho = self.fluid.rho if hasattr(self.fluid, "rho") else fem.Constant(self.mesh, float(case.fluid.density))
+        self._rho_field = rho                        # the fluid's density field
+        self.added = AddedMassStage(case, self.system, self.cut, rho, self.ns.bc_set.natural_facets, self.gdim,
+                                    self.depth, fluid_volume_ratio(case.dem, st, cp.min_thickness, self.gdim),
+                                    fluid_gyration_ratio(case.dem, st, cp.min_thickness, self.gdim), out_dir,
+                                    comm.rank)
+        self.mass0, self.inertia0 = self.added.mass0, self.added.inertia0   # the blocks' own
         h_max = comm.allreduce(float(cell_sizes(self.mesh).max(initial=0.0)), op=MPI.MAX)
         self.band = cp.band if cp.band is not None else 2.0 * h_max
         self.gap = self.h_min if cp.gap_fill is None else float(cp.gap_fill)
@@ -152,7 +152,6 @@ class CoupledModel:
         self._base_bcs = list(self.ns.bcs)
         self._plain_levelset = None        # the level set without the fill (vents, hidden pressure)
         self._pass_cut = None              # (node owners, statistics) of the last full cut rebuild
-        self._flow_added_mass = None       # the last _potential_added_mass result (the passes of a step share it)
         if self.gap > 0 and (cp.vent_pockets or cp.drain_pockets):
             imap, dofs = self.cut.S1.dofmap.index_map, self.cut.level_dofs
             self.vents = PocketVents(comm, self.cut.geom_cells, imap.local_to_global(dofs.astype(np.int32)),
@@ -231,159 +230,20 @@ class CoupledModel:
         if self.bonds is not None:
             self.series_units["broken_bonds"] = "-"
         self.output = BodyOutput(case, self.nb, self.bonds, out_dir, comm.rank)   # bodies.csv, bond breaks, VTP
-        self.added_mass_csv = None
-        if out_dir is not None and self._added_mass_from_flow() and case.coupling.added_mass > 0:
-            from ..io.csv import TimeSeriesCSV
-            self.added_mass_csv = TimeSeriesCSV(Path(out_dir) / "added_mass.csv",
-                                                {"t": "s", "block": "-", "m_tilde": "kg", "i_tilde": "kg m^2",
-                                                 "solves": "-"}, comm.rank, lazy=True)
         log.info("coupled: %d blocks, %d spheres; DEM dt %.4g s; level-set band %.4g m, gap fill %.4g m "
                  "(%d walls); cut cells %d, smallest cut fraction %.2e", self.nb, st.ns, self.system.dt, self.band,
                  self.gap, len(self.levelset.walls), self.stats.cut_cells, self.stats.min_cut_fraction)
 
-    def _remember_own_inertia(self, case: Case) -> None:
-        """Each block's own mass and inertia, its volume as the fluid sees it V_b = m_b/ρ_material
-        × the ``min_thickness`` widening (``fluid_volume_ratio``), the rotational inertia per
-        unit mass of that shape (I/m × ``fluid_gyration_ratio``), and the fluid density field
-        whose wetted mean gives ρ̄_b, for :meth:`_update_added_mass`."""
-        st = self.system.state
-        self.mass0, self.inertia0 = st.mass.copy(), st.inertia.copy()
-        dens = np.array([m.density for m in case.dem.materials])
-        self.volume_b = (st.mass / dens[st.sph_material[st.blk_sph_start[:-1]]]
-                         * fluid_volume_ratio(case.dem, st, case.coupling.min_thickness, self.gdim))
-        with np.errstate(invalid="ignore", divide="ignore"):   # fixed blocks: no added mass
-            k2 = self.inertia0 / self.mass0[:, None] * fluid_gyration_ratio(case.dem, st, case.coupling.min_thickness,
-                                                                            self.gdim)
-        self.gyration_sq = np.where(np.isfinite(k2), k2, 0.0)
-        self._rho_field = (self.fluid.rho if hasattr(self.fluid, "rho")
-                           else fem.Constant(self.mesh, float(case.fluid.density)))
-
-    def _update_added_mass(self, same_poses: bool = False) -> None:
-        """m̃_b = C_a ρ̄_b V_b with ρ̄_b the mean fluid density on block b's wetted (cut)
-        surface, so a block in air carries C_a ρ_air V_b, not the water's (with the water's,
-        the lagged m̃ aⁿ term turned floor-contact chatter into a load of several times the
-        weight of a block resting in air); 0 for blocks without cut surface and fixed blocks.
-        Raises the DEM mass and inertia (by Ĩ = m̃ k², k the fluid-seen shape's radius of
-        gyration) for the coming sub-steps. ``same_poses``: a later pass of the implicit coupling,
-        whose flow-computed m̃ is the first pass's (same cut and clusters; φ inside the blocks,
-        which ρ carries into it, moves with each pass's ū: 7e-7 of a block's velocity per step,
-        tests/test_coupled.py)."""
-        ca = self.case.coupling.added_mass
-        if ca == 0.0:
-            return
-        st = self.system.state
-        if self._added_mass_from_flow():
-            if not same_poses or self._flow_added_mass is None:
-                self._flow_added_mass = self._potential_added_mass(ca)
-            extra, extra_inertia, self.added_tensor = self._flow_added_mass
-        else:
-            # (negative fitted surface weights can overshoot a sharp ρ jump slightly: clip at 0)
-            rho_bar = np.maximum(np.nan_to_num(self.cut.wetted_mean(self.nb, self._rho_field), nan=0.0), 0.0)
-            extra = ca * rho_bar * self.volume_b
-            extra[st.fixed] = 0.0
-            extra_inertia = extra[:, None] * self.gyration_sq
-        self.added_mass, self.added_inertia = extra, extra_inertia
-        st.mass[:] = self.mass0 + extra
-        st.inertia[:] = self.inertia0 + extra_inertia
-        if self.added_tensor is not None:
-            # the kick's inverse of m I + M̃ (st.mass = m + λ_min(M̃) carries gravity, the contact
-            # dashpots and Δt_cr: the lightest direction); fixed blocks are not kicked
-            free = ~st.fixed
-            tens = self.added_tensor.copy()
-            tens[free] += self.mass0[free, None, None] * np.eye(3)[None]
-            tens[~free] = np.eye(3)[None]
-            self.system.inv_mass = np.linalg.inv(tens)
-
-    def _added_mass_from_flow(self) -> bool:
-        """Whether m̃ comes from the flow's added-mass tensor (``added_mass_model`` potential or tensor)."""
-        return self.case.coupling.added_mass_model in ("potential", "tensor")
-
-    def _potential_added_mass(self, factor: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """``added_mass_model: potential``: m̃ (nb,) [kg] and Ĩ (nb, 3) [kg m²] per block from
-        the added-mass tensor M of each moving group (block, or bonded cluster with
-        ``wall_motion: bonded_cluster``) on the current cut (``coupling/added_mass.py``):
-        m̃_group = factor × λ_max(M_translation), shared over its blocks by fluid-seen volume;
-        the rotational λ_max(M_rotation) about the group's centre of mass, less what the shared
-        m̃ already gives at the blocks' offsets, shared alike as Ĩ on every axis. Groups
-        holding a fixed block get none. Writes added_mass.csv. ``tensor``: m̃ is factor ×
-        λ_min(M_translation) shared alike, and the third result is each block's share of
-        factor × M_translation (nb, 3, 3) (None with ``potential``)."""
-        from ..coupling.added_mass import PotentialAddedMass, largest_eigenvalue
-        st = self.system.state
-        if self._potential is None:
-            self._potential = PotentialAddedMass(self.cut, self._rho_field, self.ns.bc_set.natural_facets)
-        pot = self._potential
-        labels = self._cluster_labels()
-        groups = [g for g in np.unique(labels) if not st.fixed[labels == g].any()]
-        extra, extra_inertia = np.zeros(self.nb), np.zeros((self.nb, 3))
-        tensor = self.case.coupling.added_mass_model == "tensor"
-        added_tensor = np.zeros((self.nb, 3, 3)) if tensor else None
-        if not groups:
-            return extra, extra_inertia, added_tensor
-        pot.assemble()
-        ncell = len(self.cut.cell_owner)
-        owner, second, share = self.cut.cell_owner, self.cut.cell_second, self.cut.cell_share
-        weights = np.zeros((len(groups), ncell))
-        centres = np.zeros((len(groups), 3))
-        for i, g in enumerate(groups):
-            inside = labels == g
-            in_first = (owner >= 0) & inside[np.maximum(owner, 0)]
-            in_second = (second >= 0) & inside[np.maximum(second, 0)]
-            weights[i] = np.where(in_first, 1.0 - share, 0.0) + np.where(in_second, share, 0.0)
-            m = self.mass0[inside]
-            centres[i] = (m[:, None] * st.pos[inside]).sum(axis=0) / m.sum()
-        M = pot.tensors(weights, centres) * self.depth
-        d = self.gdim
-        if tensor:   # the translational tensor itself; the scalar part is its smallest eigenvalue
-            m_group = factor * np.maximum(np.linalg.eigvalsh(M[:, :d, :d])[:, 0], 0.0)
-        else:
-            m_group = factor * largest_eigenvalue(M[:, :d, :d])
-        j_group = factor * largest_eigenvalue(M[:, d:, d:])
-        for i, g in enumerate(groups):
-            blocks = np.flatnonzero(labels == g)
-            share_b = self.volume_b[blocks] / self.volume_b[blocks].sum()
-            extra[blocks] = m_group[i] * share_b
-            if tensor:
-                added_tensor[blocks, :d, :d] = factor * share_b[:, None, None] * M[i, :d, :d][None]
-            r = st.pos[blocks] - centres[i]
-            if d == 2:
-                carried = float((extra[blocks] * (r[:, 0] ** 2 + r[:, 1] ** 2)).sum())
-            else:       # about the axis where the shared masses carry least
-                carried = float(min((extra[blocks] * ((r ** 2).sum(axis=1) - r[:, k] ** 2)).sum() for k in range(3)))
-            extra_inertia[blocks] = max(j_group[i] - carried, 0.0) * share_b[:, None]
-        if self.added_mass_csv is not None:
-            for b in range(self.nb):
-                if extra[b] > 0:
-                    self.added_mass_csv.write(t=self.ns.t, block=b, m_tilde=extra[b], i_tilde=extra_inertia[b].max(),
-                                              solves=pot.last_solves)
-        return extra, extra_inertia, added_tensor
-
     def _stabilised_load(self) -> tuple[np.ndarray, np.ndarray]:
-        """Fluid load (relaxed: ω F + (1 − ω) × the last relaxed load) + m̃ aⁿ − m̃ g and
-        torque + R Ĩ Rᵀ αⁿ (body-frame Ĩ = m̃ k², see :meth:`_update_added_mass`)."""
-        w = self.case.coupling.force_relaxation
-        if w < 1.0:
-            self.relaxed_load[:] = w * np.concatenate([self.force, self.torque]) + (1.0 - w) * self.relaxed_load
-            force, torque = self.relaxed_load[: self.nb], self.relaxed_load[self.nb:]
-        else:
-            force, torque = self.force, self.torque
-        if not self.added_mass.any() and (self.added_tensor is None or not self.added_tensor.any()):
-            return force.copy(), torque.copy()
+        """The DEM's load (coupling/added_mass.AddedMassStage.load): the fluid's, relaxed, plus
+        the lagged added-mass terms on the accelerations the fluid answers — with the flow's
+        added mass of bonded clusters, the cluster's rigid acceleration, not the bonds' ringing."""
         st = self.system.state
-        g = np.asarray(self.case.dem.gravity)
-        accel, alpha = self.accel, self.alpha_ang
-        if self._added_mass_from_flow() and self._by_cluster():
-            # the fluid answers the cluster's rigid acceleration (the motion it sees), not the bonds' ringing
-            X, A, Al = self._cluster_rigid(st.pos, self.accel, self.alpha_ang)
+        accel, alpha = self.added.accel, self.added.alpha
+        if self.added.from_flow and self._by_cluster():
+            X, A, Al = self._cluster_rigid(st.pos, accel, alpha)
             accel, alpha = A + np.cross(Al, st.pos - X), Al
-        if self.added_tensor is not None:    # M̃ aⁿ − m̃ g (m̃ = λ_min(M̃) is in the DEM's scalar mass)
-            F = force + np.einsum("bij,bj->bi", self.added_tensor, accel) - self.added_mass[:, None] * g[None, :]
-        else:
-            F = force + self.added_mass[:, None] * (accel - g[None, :])
-        R = st.rotation_matrices()
-        body = np.einsum("bji,bj->bi", R, alpha) * self.added_inertia
-        T = torque + np.einsum("bij,bj->bi", R, body)
-        return F, T
+        return self.added.load(self.force, self.torque, accel, alpha)
 
     # -------------------------------------------------------------- stages
     def _warn_thin_blocks(self, case: Case) -> None:
@@ -785,7 +645,7 @@ class CoupledModel:
             if self.hidden is not None:
                 self._hidden_load(centres)
             fluid_side = self._wall_momentum()
-            self._update_added_mass(same_poses=retake)
+            self.added.update(self.ns.t, self._cluster_labels(), same_poses=retake)
         with timer("dem sub-steps"):
             # the last step before t_end may be a fraction of run.dt: take whole DEM steps no
             # longer than dem.dt that fill it exactly
@@ -801,8 +661,7 @@ class CoupledModel:
             # the change of the wall velocity the fluid gets next step against the one it got
             # this step: what the fluid's added-mass reaction answers, so m̃ aⁿ cancels it
             _, v1, w1 = self.dem.motion(mean=mean)
-            self.accel[:] = (v1 - v0) / dt
-            self.alpha_ang[:] = (w1 - w0) / dt
+            self.added.record(v0, w0, v1, w1, dt)
         return F, fluid_side
 
     def _hidden_load(self, centres: np.ndarray) -> None:
@@ -995,8 +854,7 @@ class CoupledModel:
             if hasattr(it, "checkpoint_arrays"):
                 for name, a in it.checkpoint_arrays().items():
                     out[f"dem_int{k}__{name}"] = np.copy(a)
-        out["coupling__accel"] = np.concatenate([self.accel, self.alpha_ang])
-        out["coupling__relaxed_load"] = self.relaxed_load.copy()
+        out.update(self.added.arrays())
         if self.dem.mean_velocity is not None:
             out["coupling__mean_velocity"] = np.concatenate([self.dem.mean_velocity, self.dem.mean_omega])
         if self.system.ledger is not None:
@@ -1009,9 +867,7 @@ class CoupledModel:
         for name, a in st.arrays().items():
             a[...] = g[f"dem__{name}"]
         st.t, st.step = float(g["dem__time"][0]), int(g["dem__time"][1])
-        self.accel[:], self.alpha_ang[:] = g["coupling__accel"][: self.nb], g["coupling__accel"][self.nb:]
-        if "coupling__relaxed_load" in g:
-            self.relaxed_load[:] = g["coupling__relaxed_load"]
+        self.added.load_arrays(g)
         if "coupling__mean_velocity" in g:
             m = g["coupling__mean_velocity"]
             self.dem.mean_velocity, self.dem.mean_omega = m[: self.nb].copy(), m[self.nb:].copy()
@@ -1035,7 +891,6 @@ class CoupledModel:
         self.fluid.load_state(checkpoint)
         self.load_dem_arrays(checkpoint.globals)
         self.output.resume(checkpoint.time)                # continue the earlier run's files
-        if self.added_mass_csv is not None:
-            self.added_mass_csv.resume(checkpoint.time)
+        self.added.resume(checkpoint.time)
         self.stats = self.rebuild_cut()
 
