@@ -300,7 +300,8 @@ class NavierStokes:
         self._tau_exprs = self._tau_interpolation()
 
         self.bc_set = build_bcs(self, config.boundaries, velocity_functions)
-        self.bcs: list[fem.DirichletBC] = self.bc_set.bcs + list(extra_bcs)
+        self._fixed_bcs = self.bc_set.bcs + list(extra_bcs)
+        self.bcs: list[fem.DirichletBC] = list(self._fixed_bcs)
 
         self.A = fem.petsc.create_matrix(self.J_form)
         self.b = fem.petsc.create_vector(self.F_form)
@@ -404,6 +405,12 @@ class NavierStokes:
     def p(self) -> fem.Function:
         """Pressure at the latest time (a collapsed copy, Pa)."""
         return self.U.sub(1).collapse()
+
+    def set_step_bcs(self, bcs: Sequence[fem.DirichletBC]) -> None:
+        """Dirichlet conditions on ``W`` for the coming steps on top of the case's and the
+        constructor's (replacing any set before; ``()`` removes them): e.g. the pressure held in
+        sealed pockets of a coupled run."""
+        self.bcs = list(self._fixed_bcs) + list(bcs)
 
     def set_velocity(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:
         """Set the initial velocity u(x) (both U and U_n)."""

@@ -61,11 +61,11 @@ from ..coupling.dem_side import (
     shapes_of_blocks,
 )
 from ..coupling.fixed_point import accelerator
-from ..coupling.hidden_load import HiddenLoad, or_over_ranks
+from ..coupling.hidden_load import HiddenLoad
+from ..coupling.sealed_pockets import SealedPockets
 from ..dem.model import build_system
 from ..fcm.domain import CutDomain
 from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
-from ..fcm.pockets import PocketVents
 from ..fluid.navier_stokes import quadrature_degree
 from ..fluid.solvers import LinearSolveError
 from ..fluid.tagged_form import TaggedForm
@@ -146,21 +146,14 @@ class CoupledModel:
                                           walls=gap_walls(case.dem, self.gdim))
         self.points = np.zeros((self.cut.nodes.shape[0], 3))
         self.points[:, : self.gdim] = self.cut.nodes[:, : self.gdim]
-        self.vents = None
-        self._pocket_cells = None          # cells of the drained pockets (coupling.drain_pockets)
+        self.pockets = None                # coupling.vent_pockets / drain_pockets (coupling/sealed_pockets.py)
         self._phi_of_node = None           # phase-field dof at each mesh vertex (built on first use)
-        self._base_bcs = list(self.ns.bcs)
         self._plain_levelset = None        # the level set without the fill (vents, hidden pressure)
         self._pass_cut = None              # (node owners, statistics) of the last full cut rebuild
         if self.gap > 0 and (cp.vent_pockets or cp.drain_pockets):
-            imap, dofs = self.cut.S1.dofmap.index_map, self.cut.level_dofs
-            self.vents = PocketVents(comm, self.cut.geom_cells, imap.local_to_global(dofs.astype(np.int32)),
-                                     dofs < imap.size_local, self.cut.n_owned)
             self._plain_levelset = StructureLevelSet(self.levelset.shapes, self.nb, self.band)
-            self._node_flags = fem.Function(self.cut.S1)
-            if cp.drain_pockets:
-                self._q_of_node = self.cut.node_map(self.ns.Q)          # mesh vertex → pressure node
-                self._p_pocket = fem.Function(self.ns.Q, name="p_pocket")
+            self.pockets = SealedPockets(case, comm, self.cut, self.ns, self._plain_levelset, self.points,
+                                         getattr(self.fluid, "static", None))
         self.hidden = None                 # coupling.hidden_pressure (coupling/hidden_load.py)
         if cp.hidden_pressure != "none":
             if self._plain_levelset is None:
@@ -292,15 +285,9 @@ class CoupledModel:
             return stats
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
-        if self.vents is not None:
-            cp = self.case.coupling
-            # the pockets as the fill seals them, before a vent joins them to the rest
-            drained = self.vents.drainable(level, self._fill_free_to_part(owner), self._any_rank) \
-                if cp.drain_pockets else None
-            if cp.vent_pockets:
-                self._vent_pockets(level, owner)
-            if drained is not None:
-                self._drain_pockets(*drained)
+        if self.pockets is not None:
+            self.pockets.apply(level, owner, self.levelset, self._fill_free_to_part(owner), st.pos, st.quat,
+                               self._node_density)
         ubar, share = self._wall_velocity_at_nodes(owner, velocities)
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
@@ -310,7 +297,8 @@ class CoupledModel:
             self.hidden.rebuild(level, st.pos, st.quat)
         if self._advective_dofs is not None:
             # φ in advective form on the cells at and inside the blocks (phase_field_residual)
-            cells = self.cut.body_cells if self._pocket_cells is None else self.cut.body_cells | self._pocket_cells
+            pockets = None if self.pockets is None else self.pockets.cells
+            cells = self.cut.body_cells if pockets is None else self.cut.body_cells | pockets
             self.fluid.pf.advective_cells.x.array[self._advective_dofs] = cells
             # the volume correction holds the liquid of the fluid part
             self.fluid.pf.interface_cell_weights = self.cut.fluid_fractions()
@@ -331,25 +319,6 @@ class CoupledModel:
                                               self.levelset.fill_other[fill], self.levelset.fill_weight[fill])
         return ubar, share
 
-    def _vent_pockets(self, level: np.ndarray, owner: np.ndarray) -> None:
-        """``coupling.vent_pockets``: remove the gap fill (in place: level, owner and the fill's
-        velocity blend get the plain level set's) where it seals fluid pockets, between owners
-        free to part: one a moving block, not both of one bonded cluster (fcm/pockets.py). The
-        plain level set is evaluated only when some fill next to a pocket may go."""
-        st, ls = self.system.state, self.levelset
-        plain = {}
-
-        def plain_level():
-            if not plain:
-                plain["level"], plain["owner"] = self._plain_levelset.evaluate(self.points, st.pos, st.quat)
-            return plain["level"]
-
-        reverted = self.vents.vent(level, plain_level, self._fill_free_to_part(owner), self._any_rank)
-        if reverted.any():
-            owner[reverted] = plain["owner"][reverted]
-            ls.fill_other[reverted] = NO_SHAPE
-            ls.fill_weight[reverted] = 0.0
-
     def _fill_free_to_part(self, owner: np.ndarray) -> np.ndarray:
         """Per node: fill between owners free to part — one a moving block, not both blocks of
         one bonded cluster (the nodes where a pocket's seal may open)."""
@@ -361,56 +330,6 @@ class CoupledModel:
         moving = free[np.where(owner >= 0, owner, -1)] | free[np.where(other >= 0, other, -1)]
         return moving & ~bonded
 
-    def _drain_pockets(self, pocket: np.ndarray, rim: np.ndarray) -> None:
-        """``coupling.drain_pockets``: hold the pressure of the pockets the fill sealed
-        (``pocket``, ``rim`` of :meth:`PocketVents.drainable`; vented or not) at the ambient
-        one — as if their water could leave and enter past the block's sides, as around a block
-        of finite depth in 3D — by a Dirichlet condition on the pressure at their inner nodes
-        (no cut cell touches them), from the first solved step on (at t = 0 the pressure is not
-        solved yet: a target taken from it drove a flow inside the block whose Brinkman
-        reaction kept loading the block). Ambient for
-        pocket k: P₀ + ρ_k g·x with P₀ the mean of p − ρ_k g·x over its rim (the main fluid's
-        nodes nearest to it, from the last solved step) and ρ_k the mean density of its nodes.
-        Its cells take φ in advective form (its flow need not be solenoidal)."""
-        npockets = self.comm.allreduce(int(pocket.max(initial=-1)) + 1, op=MPI.MAX)
-        if npockets == 0 or self.ns.step_count == 0:      # no solved pressure yet to take the ambient from
-            self._pocket_cells = None
-            self.ns.bcs = list(self._base_bcs)
-            return
-        ns, static = self.ns, getattr(self.fluid, "static", None)   # static: p' = p − Π is the unknown
-        p = ns.U.x.array[ns.Q_map]
-        p = (p if static is None else static.total_pressure(p))[self._q_of_node]
-        rho = self._node_density()
-        g = np.zeros(3)
-        g[: self.gdim] = np.asarray(self.case.fluid.gravity, float)[: self.gdim]
-        gx = self.points @ g
-        owned = self.vents.owned
-        sums = np.zeros((npockets, 4))    # Σ ρ, count over the pocket; Σ (p − ρ_k g·x), count over the rim
-        for k in range(npockets):
-            mine = (pocket == k) & owned
-            sums[k, 0], sums[k, 1] = rho[mine].sum(), np.count_nonzero(mine)
-        self.comm.Allreduce(MPI.IN_PLACE, sums[:, :2], op=MPI.SUM)
-        rho_k = sums[:, 0] / np.maximum(sums[:, 1], 1)
-        for k in range(npockets):
-            ring = (rim == k) & owned
-            sums[k, 2], sums[k, 3] = (p[ring] - rho_k[k] * gx[ring]).sum(), np.count_nonzero(ring)
-        self.comm.Allreduce(MPI.IN_PLACE, sums[:, 2:], op=MPI.SUM)
-        p0 = sums[:, 2] / np.maximum(sums[:, 3], 1)
-        log.debug("drained pockets: density %s kg/m³, rim nodes %s, P₀ %s Pa", rho_k, sums[:, 3], p0)
-        inner = self.vents.inner_nodes(pocket, self._any_rank)
-        nodes = np.flatnonzero(inner & (sums[np.maximum(pocket, 0), 3] > 0))   # a pocket with no rim keeps its own
-        k = pocket[nodes]
-        target = p0[k] + rho_k[k] * gx[nodes]
-        if static is not None:
-            target -= static.p1.x.array[self._q_of_node[nodes]]
-        q = self._q_of_node[nodes]
-        self._p_pocket.x.array[q] = target
-        w = np.asarray(ns.Q_map)[q]
-        bc = fem.dirichletbc(self._p_pocket, [w.astype(np.int32), q.astype(np.int32)], ns.W.sub(1))
-        ns.bcs = list(self._base_bcs) + [bc]
-        cells = self.cut.geom_cells
-        self._pocket_cells = (pocket[cells] >= 0).any(axis=1)
-
     def _node_density(self) -> np.ndarray:
         """Fluid density [kg/m³] at the mesh vertices: from φ with a phase field, else the fluid's."""
         fl = self.case.fluid
@@ -419,10 +338,6 @@ class CoupledModel:
         if self._phi_of_node is None:
             self._phi_of_node = self.cut.node_map(self.fluid.pf.phi.function_space)
         return property_map(self.fluid.pf.phi.x.array[self._phi_of_node], fl.density, fl.gas_density)
-
-    def _any_rank(self, flags: np.ndarray) -> np.ndarray:
-        """Per-node flags (mesh vertex order) or-ed over the ranks that hold each node."""
-        return or_over_ranks(self._node_flags, self.cut.level_dofs, flags)
 
     def _shared_ownership(self, owner: np.ndarray, motion, ubar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``coupling.load_split: shared``: at each node the nearest other block (second owner)
@@ -747,9 +662,8 @@ class CoupledModel:
                      "exchange_error": self.exchange_error, "retried_steps": float(self.retried),
                      "coupling_iterations": float(self.iterations_done),
                      "coupling_residual": self.iteration_residual,
-                     "pocket_nodes": float(self.vents.pocket_nodes if self.vents else 0),
-                     "vented_nodes": float(self.vents.vented_nodes if self.vents else 0),
-                     "drained_nodes": float(self.vents.drained_nodes if self.vents else 0)})
+                     **(self.pockets.counts() if self.pockets else
+                        {"pocket_nodes": 0.0, "vented_nodes": 0.0, "drained_nodes": 0.0})})
         if self.hidden is not None:
             diag.update({f"hidden_force_{c}": float(self.hidden.surface_force[:, k].sum())
                          for k, c in enumerate("xyz"[: self.gdim])})
