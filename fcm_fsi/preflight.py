@@ -162,8 +162,8 @@ def block_boxes(case: Case, state, structure) -> tuple[np.ndarray, np.ndarray, n
     if case.dem is None or case.mesh is None:
         return None
     from .coupling.dem_side import shapes_of_blocks
-    from .dem.state import quat_to_matrix_np
     from .fcm.levelset import SPHERE
+    from .geometry import quat_to_matrix_np
     shapes = shapes_of_blocks(case.dem, state, case.coupling.min_thickness, structure)
     R = quat_to_matrix_np(state.quat)
     nb = state.nb
@@ -287,7 +287,7 @@ def check_walls(case: Case, ctx: Context) -> Iterator[Finding]:
     if case.dem is None or ctx.state is None:
         return
     st = ctx.state
-    from .dem.state import quat_to_matrix_np
+    from .geometry import quat_to_matrix_np
     R = quat_to_matrix_np(st.quat)
     centres = st.pos[st.sph_block] + np.einsum("nij,nj->ni", R[st.sph_block], st.sph_local)
     r = st.sph_radius

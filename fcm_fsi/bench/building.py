@@ -28,7 +28,7 @@ log = get_logger("bench.building")
 
 def box_corners(lo, hi, pos0, pos, quat) -> np.ndarray:
     """(nb, 8, 3) world corners of boxes built at lo/hi, now at pos/quat."""
-    from ..dem.state import quat_to_matrix_np
+    from ..geometry import quat_to_matrix_np
     c = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
     local = lo[:, None, :] + c[None] * (hi - lo)[:, None, :] - pos0[:, None, :]
     R = quat_to_matrix_np(quat)

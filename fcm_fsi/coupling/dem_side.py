@@ -41,9 +41,10 @@ import numpy as np
 
 from ..config.dem import DEMConfig
 from ..dem.model import build_structure, template_of
-from ..dem.state import DEMState, quat_to_matrix_np
+from ..dem.state import DEMState
 from ..dem.system import DEMSystem, substep_count
 from ..fcm.levelset import BOX, SPHERE, Shapes
+from ..geometry import quat_to_matrix_np
 
 __all__ = ["DEMSubcycler", "Exchange", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio",
            "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity", "shapes_of_blocks", "state_digests", "substep_count"]

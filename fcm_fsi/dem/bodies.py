@@ -1,4 +1,4 @@
-"""Rigid blocks: mass properties, surface spheres, quaternion helpers (SPEC §2, eqs 21–27).
+"""Rigid blocks: mass properties, surface spheres, quaternion constructors (SPEC §2, eqs 21–27).
 
 A block's mass, centre of mass and inertia come either from its *solid shape* and density
 (the spheres only sit on its surface, paper §3) or, for a pure clump, from its spheres
@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
+
+from ..geometry import rotate
 
 
 @dataclass(frozen=True)
@@ -96,23 +98,6 @@ def axis_angle_quat(axis, angle: float) -> np.ndarray:
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * a])
-
-
-@nb.njit(cache=True, inline="always")
-def rotate(q0, q1, q2, q3, x, y, z):
-    """R(q) (x, y, z) for a unit quaternion, returned as three floats."""
-    tx = 2.0 * (q2 * z - q3 * y)
-    ty = 2.0 * (q3 * x - q1 * z)
-    tz = 2.0 * (q1 * y - q2 * x)
-    return (x + q0 * tx + q2 * tz - q3 * ty,
-            y + q0 * ty + q3 * tx - q1 * tz,
-            z + q0 * tz + q1 * ty - q2 * tx)
-
-
-@nb.njit(cache=True, inline="always")
-def rotate_inv(q0, q1, q2, q3, x, y, z):
-    """R(q)ᵀ (x, y, z)."""
-    return rotate(q0, -q1, -q2, -q3, x, y, z)
 
 
 @nb.njit(cache=True, parallel=True)

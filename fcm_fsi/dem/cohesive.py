@@ -33,8 +33,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ..geometry import quat_to_matrix_np, rotate
 from . import L_BOND, L_BOND_LOSS
-from .bodies import rotate
 
 MODES = {"reversible": 0, "damage": 1}
 
@@ -333,7 +333,6 @@ class CohesiveBonds:
     def from_faces(cls, law: CohesiveLaw, faces: list[BondFace], pos, quat,
                    points_per_edge: int) -> CohesiveBonds:
         """Bonds on ``faces`` of blocks at ``pos``/``quat`` (the bonded reference state)."""
-        from .state import quat_to_matrix_np
         R = quat_to_matrix_np(np.asarray(quat, float).reshape(-1, 4))
         pos = np.asarray(pos, float).reshape(-1, 3)
         cols = {k: [] for k in ("bond", "a", "b", "ra", "rb", "na", "area")}

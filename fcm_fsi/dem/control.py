@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import quat_to_matrix_np
 from .integrate import omega_from_angmom
-from .state import quat_to_matrix_np
 
 MODES = ("free", "force", "velocity", "displacement")
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .bodies import rotate, rotate_inv
+from ..geometry import quat_to_matrix_np, rotate, rotate_inv
 
 
 @nb.njit(cache=True, inline="always")
@@ -162,7 +162,6 @@ def _quat_mul_np(p, q):
 
 def drift_ref(pos, quat, vel, angmom, inertia, fixed, dt):
     """NumPy reference of :func:`drift` (returns new pos, quat, omega)."""
-    from .state import quat_to_matrix_np
     free = ~fixed
     pos = pos.copy()
     quat = quat.copy()

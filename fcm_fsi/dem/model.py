@@ -9,11 +9,12 @@ import numpy as np
 
 from ..config.dem import BlockConfig, DEMConfig, GeneratorConfig
 from ..config.loader import ConfigError
+from ..geometry import quat_to_matrix_np
 from ..io.logging import get_logger
 from .bodies import BlockTemplate, axis_angle_quat, box_template, clump_template, matrix_to_quat
 from .contact import Materials, SphereContact, WallContact, damping_ratio
 from .control import Control, Controls
-from .state import DEMState, quat_to_matrix_np
+from .state import DEMState
 from .system import DEMSystem
 
 log = get_logger("dem")

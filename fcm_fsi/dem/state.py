@@ -48,6 +48,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry import quat_to_matrix_np
+
 
 @dataclass
 class DEMState:
@@ -140,18 +142,3 @@ class DEMState:
                  "sph_pos", "blk_sph_start")
         return {n: getattr(self, n) for n in names}
 
-
-def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices of unit quaternions (w, x, y, z); (..., 4) → (..., 3, 3)."""
-    w, x, y, z = (q[..., i] for i in range(4))
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - w * z)
-    R[..., 0, 2] = 2 * (x * z + w * y)
-    R[..., 1, 0] = 2 * (x * y + w * z)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - w * x)
-    R[..., 2, 0] = 2 * (x * z - w * y)
-    R[..., 2, 1] = 2 * (y * z + w * x)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R

@@ -16,8 +16,8 @@ never undercuts the in-plane depth within the band.
 
 Poses: body ``b`` has centre of mass ``body_pos[b]`` and unit quaternion ``body_quat[b]``
 = (w, x, y, z), body → world, ``x_w = body_pos + R(q) x_b`` — the convention of
-``fcm_fsi/dem/state.py`` (the kernel rotates with :func:`fcm_fsi.dem.bodies.rotate`, the
-reference with :func:`fcm_fsi.dem.state.quat_to_matrix_np`). A primitive's frame sits at
+``fcm_fsi/dem/state.py`` (the kernel rotates with :func:`fcm_fsi.geometry.rotate`, the
+reference with :func:`fcm_fsi.geometry.quat_to_matrix_np`). A primitive's frame sits at
 ``offset`` in its body frame, rotated by ``rot`` (shape frame → body frame).
 
 Search: every call (i) moves the primitives to the world, O(shapes); (ii) lists each
@@ -42,8 +42,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from fcm_fsi.dem.bodies import rotate
-from fcm_fsi.dem.state import quat_to_matrix_np
+from ..geometry import quat_to_matrix_np, rotate
 
 SPHERE, BOX, CYLINDER = 0, 1, 2
 NO_SHAPE = -2            # owner of points with no primitive within the cutoff

@@ -21,8 +21,8 @@ from fcm_fsi.coupling.dem_side import (
     substep_count,
 )
 from fcm_fsi.dem.model import build_state, build_structure, build_system
-from fcm_fsi.dem.state import quat_to_matrix_np
 from fcm_fsi.fcm.levelset import BOX, SPHERE
+from fcm_fsi.geometry import quat_to_matrix_np
 from tests.conftest import ROOT, mpi_env
 
 MAT = {"name": "m", "stiffness": 1e5, "restitution": 0.5, "friction_angle": 20.0, "density": 2000.0}

@@ -7,7 +7,7 @@ import pytest
 
 from fcm_fsi.dem.builder import assemble
 from fcm_fsi.dem.cohesive import CohesiveBonds, CohesiveLaw
-from fcm_fsi.dem.state import quat_to_matrix_np
+from fcm_fsi.geometry import quat_to_matrix_np
 
 SC, DF = 1.0e7, 0.02
 

@@ -12,11 +12,10 @@ import numba
 import numpy as np
 
 from ...dem import L_SPRING
-from ...dem.bodies import rotate
 from ...dem.builder import assemble
 from ...dem.cohesive import CohesiveLaw, shape_g
-from ...dem.state import quat_to_matrix_np
 from ...dem.strength import section_capacity
+from ...geometry import quat_to_matrix_np, rotate
 from ...io.csv import TimeSeriesCSV
 from ...io.logging import get_logger
 from ..registry import at_most, register, rel_error_metric, report_only

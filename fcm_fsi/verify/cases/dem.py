@@ -248,7 +248,7 @@ def _rotor(omega0, dt):
 
 @register("free_rotation", "torque-free asymmetric box spun near its intermediate axis (Dzhanibekov flips)", issue=6)
 def free_rotation(level, out_dir: Path, comm) -> list:
-    from ...dem.state import quat_to_matrix_np
+    from ...geometry import quat_to_matrix_np
     W, eps = 10.0, 1e-3 * 10.0
     dt = 2e-4                       # Ω Δt = 2e-3
     t_end = 30.0 if level == "quick" else 120.0

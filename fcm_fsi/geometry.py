@@ -1,0 +1,44 @@
+"""Rotations by unit quaternions q = (w, x, y, z), body → world: ``x_w = R(q) x_b``.
+
+The convention of the DEM state (``fcm_fsi/dem/state.py``) and of the structure level set
+(``fcm_fsi/fcm/levelset.py``); both packages import these helpers from here, so neither
+depends on the other. :func:`rotate` is the Numba kernel, :func:`quat_to_matrix_np` its
+plain-NumPy reference.
+"""
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+
+@nb.njit(cache=True, inline="always")
+def rotate(q0, q1, q2, q3, x, y, z):
+    """R(q) (x, y, z) for a unit quaternion, returned as three floats."""
+    tx = 2.0 * (q2 * z - q3 * y)
+    ty = 2.0 * (q3 * x - q1 * z)
+    tz = 2.0 * (q1 * y - q2 * x)
+    return (x + q0 * tx + q2 * tz - q3 * ty,
+            y + q0 * ty + q3 * tx - q1 * tz,
+            z + q0 * tz + q1 * ty - q2 * tx)
+
+
+@nb.njit(cache=True, inline="always")
+def rotate_inv(q0, q1, q2, q3, x, y, z):
+    """R(q)ᵀ (x, y, z)."""
+    return rotate(q0, -q1, -q2, -q3, x, y, z)
+
+
+def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices of unit quaternions (w, x, y, z); (..., 4) → (..., 3, 3)."""
+    w, x, y, z = (q[..., i] for i in range(4))
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
