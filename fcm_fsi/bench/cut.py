@@ -22,8 +22,8 @@ import numpy as np
 from mpi4py import MPI
 
 from ..config.fluid import BoundaryCondition, FluidConfig
-from ..fcm.domain import CutDomain
 from ..fcm.levelset import Shapes, StructureLevelSet
+from ..fluid.cut_walls import CutDomain
 from ..fluid.navier_stokes import NavierStokes
 from ..mesh.channel import box
 

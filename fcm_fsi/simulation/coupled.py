@@ -64,8 +64,8 @@ from ..coupling.fixed_point import accelerator
 from ..coupling.hidden_load import HiddenLoad
 from ..coupling.sealed_pockets import SealedPockets
 from ..dem.model import build_system
-from ..fcm.domain import CutDomain
 from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
+from ..fluid.cut_walls import CutDomain
 from ..fluid.navier_stokes import quadrature_degree
 from ..fluid.solvers import LinearSolveError
 from ..fluid.tagged_form import TaggedForm

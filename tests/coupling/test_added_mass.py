@@ -8,7 +8,7 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from fcm_fsi.coupling.added_mass import PotentialAddedMass, largest_eigenvalue
-from fcm_fsi.fcm.domain import CutDomain
+from fcm_fsi.fluid.cut_walls import CutDomain
 
 RHO = 1000.0
 

@@ -18,9 +18,10 @@ from petsc4py import PETSc
 from fcm_fsi.config.fluid import BoundaryCondition, FluidConfig
 from fcm_fsi.dem.bodies import axis_angle_quat
 from fcm_fsi.fcm.cut import cut_measures
-from fcm_fsi.fcm.domain import CUT_QUADRATURE_DEGREE, CutDomain
+from fcm_fsi.fcm.domain import CUT_QUADRATURE_DEGREE
 from fcm_fsi.fcm.levelset import Shapes, StructureLevelSet
 from fcm_fsi.fcm.moments import _hull_moments, _planar_moments, fitted_weights, fitted_weights_reference
+from fcm_fsi.fluid.cut_walls import CutDomain
 from fcm_fsi.fluid.navier_stokes import NavierStokes
 from fcm_fsi.fluid.solvers import ITERATIVE_3D
 from fcm_fsi.mesh.channel import rectangle

@@ -31,8 +31,8 @@ from mpi4py import MPI
 
 from ...dem.bodies import axis_angle_quat
 from ...fcm.cut import cut_measures
-from ...fcm.domain import CutDomain
 from ...fcm.levelset import Shapes, StructureLevelSet
+from ...fluid.cut_walls import CutDomain
 from ..registry import Metric, at_least, at_most, register, report_only
 
 RADIUS = 0.3                               # sphere/disc radius [m] in the unit box

@@ -2,7 +2,7 @@
 
 The channel is meshed without the cylinder hole (``mesh.channel.channel_unfitted``); the
 cylinder is a level set of the structure (``fcm.levelset``: a capped ``Shapes.cylinder``
-carried by body 0 at rest) and is cut out by ``fcm.domain.CutDomain``: moment-fitted
+carried by body 0 at rest) and is cut out by ``fluid.cut_walls.CutDomain``: moment-fitted
 quadrature on the fluid part of cut cells, fictitious factor α on the solid part, the
 default (``pressure``) wall terms with p̄ = γ(μ/h + ρh/Δt) on Γ. Drag and lift are the wall
 traction on Γ
@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from ...config.fluid import BoundaryCondition
-from ...fcm.domain import CutDomain
 from ...fcm.levelset import Shapes, StructureLevelSet
+from ...fluid.cut_walls import CutDomain
 from ...fluid.forces import probe
 from ...fluid.navier_stokes import NavierStokes
 from ...io.logging import get_logger

@@ -24,8 +24,8 @@ from mpi4py import MPI
 
 from ...config.fluid import BoundaryCondition, FluidConfig, StabilizationConfig
 from ...config.mesh import MeshConfig, RefineZone
-from ...fcm.domain import CutDomain
 from ...fcm.levelset import Shapes, StructureLevelSet
+from ...fluid.cut_walls import CutDomain
 from ...fluid.navier_stokes import NavierStokes
 from ...io.logging import get_logger
 from ...mesh.build import gmsh_box

@@ -20,8 +20,8 @@ import numpy as np
 
 from ...config.fluid import BoundaryCondition, FluidConfig, StabilizationConfig
 from ...config.mesh import MeshConfig, RefineZone
-from ...fcm.domain import CutDomain
 from ...fcm.levelset import Shapes, StructureLevelSet
+from ...fluid.cut_walls import CutDomain
 from ...fluid.forces import probe
 from ...fluid.navier_stokes import NavierStokes
 from ...io.logging import get_logger
