@@ -155,30 +155,6 @@ def _depth_axes(shapes: Shapes, boxes: np.ndarray, state: DEMState, gdim: int) -
     return np.abs(axes[:, 2, :]) > 0.5
 
 
-def gap_walls(cfg: DEMConfig, gdim: int) -> np.ndarray:
-    """Planes (np, 6) = point [m], normal into the domain, of the DEM's permanent plane and
-    box walls, for the level set's gap fill (``coupling.gap_fill``). Walls with ``remove_at``
-    (gates) and triangle meshes are left out; for a 2D fluid (points at z = 0) so are planes
-    whose normal has a z component (they bound the blocks' depth, not the fluid)."""
-    rows = []
-    for w in cfg.walls:
-        if w.remove_at is not None:
-            continue
-        if w.kind == "plane":
-            rows.append([*w.point, *w.normal])
-        elif w.kind == "box":
-            for d in range(3):
-                for corner, sgn in ((w.lo, 1.0), (w.hi, -1.0)):
-                    if not (d == 2 and sgn < 0 and w.open_top):
-                        n = np.zeros(3)
-                        n[d] = sgn
-                        rows.append([*corner, *n])
-    planes = np.array(rows, np.float64).reshape(-1, 6)
-    if gdim == 2:
-        planes = planes[np.abs(planes[:, 5]) == 0.0]
-    return planes
-
-
 def _described_blocks(cfg: DEMConfig):
     """(BlockConfig, number of blocks) in the state's block order (see ``build_state``):
     cfg.blocks one by one, then each generator's template ``count`` times."""

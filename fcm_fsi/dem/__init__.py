@@ -3,9 +3,13 @@
 Layout of the package (data flow top to bottom):
 
 - ``state.py``       :class:`DEMState`, the struct-of-arrays state (layout and units there)
-- ``bodies.py``      mass properties (box, clump), quaternion helpers
+- ``bodies.py``      mass properties (box, clump), quaternion constructors
+                     (rotations: ``fcm_fsi/geometry.py``)
 - ``neighbours.py``  cell list → Verlet pair list with skin
 - ``contact.py``     sphere–sphere and sphere–wall contact (eqs 18–20)
+- ``walls.py``       the case's static walls, read once: for the wall contact and the
+                     fluid's gap fill
+- ``laws.py``        the registry of contact laws (which ones the fused step implements)
 - ``integrate.py``   leapfrog translation + split free-rotor rotation (eqs 25–27)
 - ``control.py``     prescribed displacement / velocity / force per block and DOF
 - ``ledger.py``      energy ledger

@@ -1,5 +1,5 @@
-"""A :class:`DEMSystem` from a ``DEMConfig``: blocks, generators, walls, controls, and the
-stable-time-step check (tutorial §6)."""
+"""A :class:`DEMSystem` from a ``DEMConfig``: blocks, generators, walls (``walls.py``), the
+contact law (``laws.py``), controls, and the stable-time-step check (tutorial §6)."""
 from __future__ import annotations
 
 import dataclasses
@@ -12,10 +12,12 @@ from ..config.loader import ConfigError
 from ..geometry import quat_to_matrix_np
 from ..io.logging import get_logger
 from .bodies import BlockTemplate, axis_angle_quat, box_template, clump_template, matrix_to_quat
-from .contact import Materials, SphereContact, WallContact, damping_ratio
+from .contact import Materials, damping_ratio
 from .control import Control, Controls
+from .laws import DEFAULT_LAW, LAWS
 from .state import DEMState
 from .system import DEMSystem
+from .walls import walls_of
 
 log = get_logger("dem")
 
@@ -123,53 +125,18 @@ def build_state(cfg: DEMConfig, structure=None) -> DEMState:
     return DEMState.from_blocks(pos, quat, mass, inertia, sb, sl, sr, sm, vel=vel, omega=omega, fixed=fixed)
 
 
-def walls_of(cfg: DEMConfig, mats: Materials, ns: int, clip: bool) -> WallContact | None:
-    planes, pmat, tris, tmesh, mmat, puntil, muntil = [], [], [], [], [], [], []
-    for w in cfg.walls:
-        mi = cfg.material_index(w.material)
-        until = math.inf if w.remove_at is None else w.remove_at
-        n_pl = len(planes)
-        if w.kind == "plane":
-            n = np.asarray(w.normal, np.float64)
-            n /= np.linalg.norm(n)
-            planes.append([*n, float(n @ np.asarray(w.point))])
-            pmat.append(mi)
-        elif w.kind == "box":
-            lo, hi = np.asarray(w.lo), np.asarray(w.hi)
-            for d in range(3):
-                if d == 2 and w.open_top:
-                    faces = [(lo, 1.0)]
-                else:
-                    faces = [(lo, 1.0), (hi, -1.0)]
-                for corner, sgn in faces:
-                    n = np.zeros(3)
-                    n[d] = sgn
-                    planes.append([*n, sgn * corner[d]])
-                    pmat.append(mi)
-        else:
-            V = np.asarray(w.vertices, np.float64)
-            for t in w.triangles:
-                tris.append(V[list(t)])
-                tmesh.append(len(mmat))
-            mmat.append(mi)
-            muntil.append(until)
-        puntil.extend([until] * (len(planes) - n_pl))
-    if not planes and not tris:
-        return None
-    return WallContact(mats, np.reshape(planes, (-1, 4)), pmat, np.reshape(tris, (-1, 3, 3)), tmesh, mmat, ns, clip,
-                       until=puntil + muntil)
-
-
-def build_system(cfg: DEMConfig, with_ledger: bool = True, structure=None) -> DEMSystem:
+def build_system(cfg: DEMConfig, with_ledger: bool = True, structure=None, law: str = DEFAULT_LAW) -> DEMSystem:
     """Blocks, contact, walls, controls; refuses dt > dt_safety·Δt_cr (ConfigError).
-    ``structure``: the built ``dem.structure`` when the caller has it (built here otherwise)."""
+    ``structure``: the built ``dem.structure`` when the caller has it (built here otherwise);
+    ``law``: the contact law, a name in :data:`~fcm_fsi.dem.laws.LAWS`."""
     if structure is None:
         structure = build_structure(cfg)
     state = build_state(cfg, structure)
     mats = materials_of(cfg)
     skin = cfg.skin if cfg.skin is not None else 0.3 * float(state.sph_radius.min())
-    inter = [SphereContact(mats, skin, cfg.clip_normal)]
-    walls = walls_of(cfg, mats, state.ns, cfg.clip_normal)
+    contact = LAWS[law]
+    inter = [contact.spheres(mats, skin, cfg.clip_normal)]
+    walls = contact.walls(walls_of(cfg), mats, state.ns, cfg.clip_normal)
     if walls is not None:
         inter.append(walls)
     bonds = cohesive_bonds(cfg, state, structure)

@@ -9,8 +9,8 @@ One step n → n+1 (between steps ``sph_pos`` matches ``pos``/``quat``):
 3. ``ledger``     energy bookkeeping (optional, every step when enabled)
 4. ``drift``      x += Δt v, q by the split free-rotor flow, ω refreshed; spheres moved
 
-Without controls and ledger and with only sphere–sphere contact and walls as interactions,
-the same step runs as two Numba kernels (``fused.py``: the pair kernel, then one pass over
+Without controls and ledger and with only the sphere–sphere and wall interactions of a contact
+law registered as fused (``laws.py``), the same step runs as two Numba kernels (``fused.py``: the pair kernel, then one pass over
 the blocks for the rest), with bit-identical results.
 """
 from __future__ import annotations
@@ -25,6 +25,7 @@ from .contact import HIST, SphereContact, WallContact
 from .control import Controls
 from .fused import advance_blocks
 from .integrate import drift, kick, omega_from_angmom
+from .laws import fused_parts
 from .ledger import Ledger
 from .state import DEMState
 
@@ -105,15 +106,11 @@ class DEMSystem:
             self.controls.add_forces(f, t)
 
     def _fusable(self):
-        """(sphere contact, walls or None) when the step can run fused (module docstring)."""
+        """(sphere contact, walls or None) when the step can run fused (module docstring): the
+        interactions are those of a contact law registered as fused (``laws.py``)."""
         if not self.fuse or self.ledger is not None or self.controls is not None:
             return None
-        its = self.interactions
-        if len(its) == 1 and type(its[0]) is SphereContact:
-            return its[0], None
-        if len(its) == 2 and type(its[0]) is SphereContact and type(its[1]) is WallContact:
-            return its[0], its[1]
-        return None
+        return fused_parts(self.interactions)
 
     def _fused_step(self, contact: SphereContact, walls: WallContact | None) -> None:
         st, dt, led = self.state, self.dt, self.led

@@ -57,13 +57,13 @@ from ..coupling.dem_side import (
     fluid_gyration_ratio,
     fluid_thickness,
     fluid_volume_ratio,
-    gap_walls,
     shapes_of_blocks,
 )
 from ..coupling.fixed_point import accelerator
 from ..coupling.hidden_load import HiddenLoad
 from ..coupling.sealed_pockets import SealedPockets
 from ..dem.model import build_system
+from ..dem.walls import gap_walls
 from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
 from ..fluid.cut_walls import CutDomain
 from ..fluid.navier_stokes import quadrature_degree

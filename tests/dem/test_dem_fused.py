@@ -3,13 +3,17 @@ the stage-by-stage step (compute_forces, kick, drift, update_sphere_positions): 
 import numpy as np
 import pytest
 
+from fcm_fsi.dem.contact import SphereContact, WallContact
+from fcm_fsi.dem.laws import LAWS, ContactLaw, register
 from fcm_fsi.dem.model import build_system
 from fcm_fsi.verify.cases.dem import _cfg, repose_config
 
+FUSED_LAWS = [name for name, law in LAWS.items() if law.fused]
 
-def pour(fuse: bool, steps: int = 2400, t_gate=None, tensor: bool = False):
+
+def pour(fuse: bool, steps: int = 2400, t_gate=None, tensor: bool = False, law: str = "spring_dashpot"):
     cfg = repose_config(40, 5, 2.5e-5) if t_gate is None else repose_config(40, 5, 2.5e-5, t_gate=t_gate)
-    s = build_system(_cfg(cfg), with_ledger=False)
+    s = build_system(_cfg(cfg), with_ledger=False, law=law)
     s.fuse = fuse
     if tensor:     # an anisotropic added inertia (as coupled runs with added_mass_model: tensor set)
         m = s.state.mass
@@ -30,12 +34,14 @@ def pour(fuse: bool, steps: int = 2400, t_gate=None, tensor: bool = False):
     return s, len(calls)
 
 
+@pytest.mark.parametrize("law", FUSED_LAWS)
 @pytest.mark.parametrize("t_gate, tensor", [(None, False), (0.03, False), (None, True)])
-def test_fused_step_is_bit_identical_to_stage_by_stage(t_gate, tensor):
+def test_fused_step_is_bit_identical_to_stage_by_stage(t_gate, tensor, law):
     """A pour into a box (walls, one of them a gate removed at t_gate: released wall contacts;
-    with ``tensor``, an inverse inertia tensor per block in the kick)."""
-    a, na = pour(True, t_gate=t_gate, tensor=tensor)
-    b, nb_ = pour(False, t_gate=t_gate, tensor=tensor)
+    with ``tensor``, an inverse inertia tensor per block in the kick), for every contact law
+    registered as fused."""
+    a, na = pour(True, t_gate=t_gate, tensor=tensor, law=law)
+    b, nb_ = pour(False, t_gate=t_gate, tensor=tensor, law=law)
     assert na == 2400 and nb_ == 0
     assert a.interactions[0].n_contacts > 0 and np.any(a.interactions[1].hist != 0)
     for name in ("pos", "quat", "vel", "omega", "angmom", "sph_pos"):
@@ -57,3 +63,32 @@ def test_fused_path_only_without_ledger_and_controls():
     assert s._fusable() is not None
     s.interactions.append(object())
     assert s._fusable() is None
+
+
+def test_a_law_not_registered_as_fused_runs_stage_by_stage():
+    """A new law must say whether the fused step implements it; one registered with
+    fused=False (here the same law in subclasses) never takes the fused path."""
+    class Spheres(SphereContact):
+        pass
+
+    class Walls(WallContact):
+        pass
+
+    def walls(w, mats, ns, clip):
+        return Walls(mats, w.planes, w.plane_mat, w.tris, w.tri_mesh, w.mesh_mat, ns, clip, until=w.until)
+
+    with pytest.raises(TypeError):
+        ContactLaw(name="no_flag", sphere_type=Spheres, wall_type=Walls, spheres=Spheres, walls=walls)
+    with pytest.raises(TypeError):
+        ContactLaw(name="bad_flag", sphere_type=Spheres, wall_type=Walls, spheres=Spheres, walls=walls, fused=None)
+    with pytest.raises(ValueError):
+        register(LAWS["spring_dashpot"])
+    register(ContactLaw(name="unfused_copy", sphere_type=Spheres, wall_type=Walls, spheres=Spheres, walls=walls,
+                        fused=False))
+    try:
+        s = build_system(_cfg(repose_config(10, 5, 2.5e-5)), with_ledger=False, law="unfused_copy")
+        assert type(s.interactions[0]) is Spheres and type(s.interactions[1]) is Walls
+        assert s._fusable() is None
+        assert build_system(_cfg(repose_config(10, 5, 2.5e-5)), with_ledger=False)._fusable() is not None
+    finally:
+        del LAWS["unfused_copy"]
