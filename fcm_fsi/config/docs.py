@@ -1,11 +1,16 @@
 """Generate docs/case-reference.md from the schema, so the docs cannot drift from the code.
 
     python -m fcm_fsi.config.docs > docs/case-reference.md
+
+The reference ends with the pre-run checks (``fcm_fsi.preflight.CHECKS``). They look at the
+built geometry, so they live above config: the caller passes them in, and the command above
+imports them only when run as a script.
 """
 from __future__ import annotations
 
 import dataclasses
 import sys
+from collections.abc import Callable, Sequence
 from typing import get_type_hints
 
 from .case import RESOLUTION_DOC, Case
@@ -31,7 +36,8 @@ def _default_text(f: dataclasses.Field) -> str:
     return "**required**"
 
 
-def reference_markdown() -> str:
+def reference_markdown(checks: Sequence[Callable]) -> str:
+    """The case-file reference: every section of the schema, then the pre-run ``checks``."""
     lines = ["# Case-file reference", "",
              "Generated from the schema by `python -m fcm_fsi.config.docs > docs/case-reference.md`;",
              "a test fails when this file is stale. Units are SI. Unknown keys are errors.", "",
@@ -54,18 +60,18 @@ def reference_markdown() -> str:
             for sub in _section_types(hints[f.name]):
                 queue.append((f.name if path == "(top level)" else f"{path}.{f.name}", sub))
         lines.append("")
-    return "\n".join(lines + checks_markdown())
+    return "\n".join(lines + checks_markdown(checks))
 
 
-def checks_markdown() -> list[str]:
-    """The pre-run checks of ``fcm_fsi.preflight`` (every run and ``--validate``), one line each."""
-    from ..preflight import CHECKS
+def checks_markdown(checks: Sequence[Callable]) -> list[str]:
+    """The pre-run checks (``fcm_fsi.preflight.CHECKS``: every run and ``--validate``), one line
+    each, from their docstrings."""
     lines = ["## Pre-run checks", "",
              "Run before anything is built, by every run and by `--validate` (`fcm_fsi/preflight.py`). "
              "An error stops with exit code 2 and one line naming the key; a warning is logged and the run "
              "goes on. Every resolution level is validated against the schema; these checks apply to the "
              "chosen one.", ""]
-    for check in CHECKS:
+    for check in checks:
         doc = " ".join((check.__doc__ or "").split())
         lines.append(f"- `{check.__name__}`: {doc}")
     lines.append("")
@@ -73,4 +79,5 @@ def checks_markdown() -> list[str]:
 
 
 if __name__ == "__main__":
-    sys.stdout.write(reference_markdown())
+    from ..preflight import CHECKS
+    sys.stdout.write(reference_markdown(CHECKS))
