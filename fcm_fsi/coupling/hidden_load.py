@@ -58,7 +58,7 @@ def or_over_ranks(work: fem.Function, dofs: np.ndarray, flags: np.ndarray) -> np
 
 class HiddenLoad:
     """``coupling.hidden_pressure`` for the ``nb`` bodies of a cut domain ``cut``
-    (fcm/domain.CutDomain): ``plain`` the bodies' level set without the gap fill (a
+    (fluid/cut_walls.CutDomain): ``plain`` the bodies' level set without the gap fill (a
     StructureLevelSet), ``pressure_space`` the fluid's P1 pressure space, ``points`` (n, 3) the
     mesh vertices, ``gravity`` (gdim,) [m/s²], ``h_min`` [m] the smallest cell diameter,
     ``depth`` [m] the span of a 2D fluid (1 in 3D)."""

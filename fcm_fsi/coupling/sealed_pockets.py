@@ -26,7 +26,7 @@ log = get_logger("coupled")
 
 
 class SealedPockets:
-    """Vents and drains of the pockets on the cut domain ``cut`` (fcm/domain.CutDomain) for
+    """Vents and drains of the pockets on the cut domain ``cut`` (fluid/cut_walls.CutDomain) for
     the Navier–Stokes solver ``ns`` (its pressure held in drained pockets by
     ``ns.set_step_bcs``): ``plain`` the bodies' level set without the fill (a
     StructureLevelSet), ``points`` (n, 3) the mesh vertices, ``static`` the two-phase

@@ -4,7 +4,7 @@ One fluid step tⁿ → tⁿ⁺¹ (stages as in the timing table):
 
 (a) **cut rebuild**: the level set of the blocks at their poses at tⁿ (``fcm.levelset``),
     the moment-fitted cut weights and the wall velocity ū = v + ω × (x − x_c) of the
-    owning block at every node (``fcm.domain.CutDomain.update``);
+    owning block at every node (``fluid.cut_walls.CutDomain.update``);
 (b) **fluid**: phase field (two-phase cases) and Navier–Stokes on the cut domain, the
     wall condition the penalty term on ū (explicit in the block motion);
 (c) **exchange**: force and torque of the fluid on each block from the wall traction on
