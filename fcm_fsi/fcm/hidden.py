@@ -439,7 +439,8 @@ class HiddenSurface:
         local = np.zeros((len(functions), n))
         for j, fn in enumerate(functions):
             if found.size:
-                local[j, found] = fn.eval(points[found], cell[first].astype(np.int32))[:, 0]
+                # (eval returns a flat array for a single point)
+                local[j, found] = np.reshape(fn.eval(points[found], cell[first].astype(np.int32)), (found.size, -1))[:, 0]
         hit = np.zeros(n)
         hit[found] = 1.0
         local = self.comm.allreduce(local, op=MPI.SUM)

@@ -184,7 +184,8 @@ class ColumnPressure:
         local = np.zeros((len(functions) + 1, len(pts)))
         for j, fn in enumerate(functions):
             if point.size:
-                local[j, point] = fn.eval(pts[point], cells)[:, 0]
+                # (eval returns a flat array for a single point)
+                local[j, point] = np.reshape(fn.eval(pts[point], cells), (len(cells), -1))[:, 0]
         local[-1, point] = 1.0
         total = self.comm.allreduce(local, op=MPI.SUM)
         hits = total[-1]
