@@ -20,6 +20,10 @@ from __future__ import annotations
 
 from petsc4py import PETSc
 
+from ..io.logging import get_logger
+
+log = get_logger("solvers")
+
 DIRECT_LU = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
 ITERATIVE_3D = {"ksp_type": "gmres", "ksp_gmres_restart": 100, "ksp_rtol": 1e-6, "ksp_max_it": 1000,
                 "pc_type": "bjacobi", "sub_pc_type": "ilu", "sub_pc_factor_levels": 0}
@@ -82,11 +86,44 @@ def make_ksp(comm, A: PETSc.Mat, prefix: str, options: dict,
 _PENDING: dict[int, tuple[str, list[str]]] = {}
 
 
+#: MUMPS INFOG(1) codes that more workspace cures, and how often a factorisation is retried
+#: with ICNTL(14) (the workspace's margin over the analysis's estimate, %) doubled
+MUMPS_WORKSPACE = (-8, -9)
+WORKSPACE_RETRIES = 3
+
+
 def solve(ksp: PETSc.KSP, b: PETSc.Vec, x: PETSc.Vec) -> None:
     """``ksp.solve(b, x)`` for a KSP of :func:`make_ksp`; after the first solve its options
-    leave the global table (the set-up has read them all)."""
+    leave the global table (the set-up has read them all). A MUMPS factorisation that ran
+    out of workspace is retried with more (:func:`more_mumps_workspace`)."""
     ksp.solve(b, x)
     _release_options(ksp.handle)
+    for _ in range(WORKSPACE_RETRIES):
+        if not more_mumps_workspace(ksp):
+            break
+        ksp.solve(b, x)
+
+
+def more_mumps_workspace(ksp) -> bool:
+    """When the last solve failed in a MUMPS factorisation for want of workspace (INFOG(1)
+    −8 or −9: the analysis underestimates it when pivots are delayed, as in cut cells with a
+    tiny fluid part), double its ICNTL(14) (at least 50 %) and mark the operator changed so
+    the next solve factorises again; True if it did. INFOG is global, so all ranks agree."""
+    if ksp.getConvergedReason() != PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED:
+        return False
+    pc = ksp.getPC()
+    if pc.getType() not in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY):
+        return False
+    factor = pc.getFactorMatrix()
+    if factor.getType() != "mumps" or factor.getMumpsInfog(1) not in MUMPS_WORKSPACE:
+        return False
+    margin = max(2 * factor.getMumpsIcntl(14), 50)
+    factor.setMumpsIcntl(14, margin)
+    pc.setReusePreconditioner(False)
+    ksp.getOperators()[1].stateIncrease()
+    log.warning("linear solve %s: MUMPS ran out of workspace (INFOG(1) = %d); factorising again with "
+                "mat_mumps_icntl_14 = %d", ksp.getOptionsPrefix(), factor.getMumpsInfog(1), margin)
+    return True
 
 
 def _release_options(handle: int) -> None:

@@ -83,3 +83,31 @@ def test_a_failed_mumps_factorisation_is_named():
     solve_ones(ksp, A)
     with pytest.raises(LinearSolveError, match=r"reason -11.*MUMPS INFOG\(1\) = -10.*singular"):
         check_converged(ksp, step=3, time=0.5)
+
+
+def test_a_mumps_factorisation_out_of_workspace_is_retried_with_more_and_no_other():
+    """INFOG(1) = −9 (or −8): ICNTL(14) is doubled, at least to 50 %, and the operator is
+    marked changed so that the next solve factorises again. No deterministic small matrix
+    makes MUMPS run out of workspace, so a stand-in factor reports it; a singular matrix
+    (−10, the real MUMPS) is not retried."""
+    from types import SimpleNamespace
+
+    from fcm_fsi.fluid.solvers import more_mumps_workspace
+    seen = {"icntl": {14: 20}, "state": 0, "reuse": None}
+    factor = SimpleNamespace(getType=lambda: "mumps", getMumpsInfog=lambda k: -9,
+                             getMumpsIcntl=lambda k: seen["icntl"][k],
+                             setMumpsIcntl=lambda k, v: seen["icntl"].__setitem__(k, v))
+    pc = SimpleNamespace(getType=lambda: PETSc.PC.Type.LU, getFactorMatrix=lambda: factor,
+                         setReusePreconditioner=lambda flag: seen.__setitem__("reuse", flag))
+    P = SimpleNamespace(stateIncrease=lambda: seen.__setitem__("state", seen["state"] + 1))
+    ksp = SimpleNamespace(getConvergedReason=lambda: PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED,
+                          getPC=lambda: pc, getOperators=lambda: (P, P), getOptionsPrefix=lambda: "t_ws_")
+    assert more_mumps_workspace(ksp)
+    assert seen["icntl"][14] == 50 and seen["state"] == 1 and seen["reuse"] is False
+    assert more_mumps_workspace(ksp) and seen["icntl"][14] == 100
+    A = tridiagonal(zero_row=7)
+    real = make_ksp(MPI.COMM_WORLD, A, "t_sing2_", {"ksp_type": "preonly", "pc_type": "lu",
+                                                    "pc_factor_mat_solver_type": "mumps"})
+    solve_ones(real, A)
+    assert real.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED
+    assert not more_mumps_workspace(real)
