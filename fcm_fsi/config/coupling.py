@@ -86,8 +86,8 @@ class CouplingConfig:
                            "mass the explicit coupling does not stabilise). none: the whole load on the cut surface "
                            "(a block resting in still water is pushed down by the water above it). The hidden part's "
                            "load goes to the block only (its reaction is the floor's), so exchange_error leaves it "
-                           "out. Not yet the default: a floating box's draft moves from -1.1 % to -3.9 % with it "
-                           "(fcm/hidden.py, docs/coupling.md)")
+                           "out. Not yet the default: with it the settling sphere misses its drag target and a bonded "
+                           "wall broken by a bore diverges (coupling/hidden_load.py; docs/coupling.md, Limits)")
     min_thickness: float = param(0.0, unit="m", doc="box blocks (and structure blocks) thinner than this are widened "
                                                   "to it in the fluid's level set only (the DEM keeps their true "
                                                   "size): a wall thinner than about one cell falls between the mesh "
