@@ -109,17 +109,12 @@ def more_mumps_workspace(ksp) -> bool:
     −8 or −9: the analysis underestimates it when pivots are delayed, as in cut cells with a
     tiny fluid part), double its ICNTL(14) (at least 50 %) and mark the operator changed so
     the next solve factorises again; True if it did. INFOG is global, so all ranks agree."""
-    if ksp.getConvergedReason() != PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED:
-        return False
-    pc = ksp.getPC()
-    if pc.getType() not in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY):
-        return False
-    factor = pc.getFactorMatrix()
-    if factor.getType() != "mumps" or factor.getMumpsInfog(1) not in MUMPS_WORKSPACE:
+    factor = failed_mumps_factor(ksp)
+    if factor is None or factor.getMumpsInfog(1) not in MUMPS_WORKSPACE:
         return False
     margin = max(2 * factor.getMumpsIcntl(14), 50)
     factor.setMumpsIcntl(14, margin)
-    pc.setReusePreconditioner(False)
+    ksp.getPC().setReusePreconditioner(False)
     ksp.getOperators()[1].stateIncrease()
     log.warning("linear solve %s: MUMPS ran out of workspace (INFOG(1) = %d); factorising again with "
                 "mat_mumps_icntl_14 = %d", ksp.getOptionsPrefix(), factor.getMumpsInfog(1), margin)
@@ -152,21 +147,28 @@ MUMPS_ERRORS = {-8: "integer workspace too small: raise mat_mumps_icntl_14 (extr
                 -13: "out of memory"}
 
 
-def factor_failure(ksp: PETSc.KSP) -> str:
-    """'; MUMPS INFOG(1) = …' when the preconditioner is a MUMPS factorisation that failed,
-    else '' (a failed factorisation shows only as KSP reason −11, DIVERGED_PCSETUP_FAILED)."""
+def failed_mumps_factor(ksp):
+    """The MUMPS factor matrix of the last solve when its set-up (the factorisation) failed,
+    else None (a failed factorisation shows only as KSP reason −11, DIVERGED_PCSETUP_FAILED)."""
     if ksp.getConvergedReason() != PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED:
-        return ""
+        return None
     try:
         pc = ksp.getPC()
         if pc.getType() not in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY):
-            return ""
+            return None
         factor = pc.getFactorMatrix()
-        if factor.getType() != "mumps":
-            return ""
-        code, detail = factor.getMumpsInfog(1), factor.getMumpsInfog(2)
+        return factor if factor.getType() == "mumps" else None
     except PETSc.Error:
+        return None
+
+
+def factor_failure(ksp: PETSc.KSP) -> str:
+    """'; MUMPS INFOG(1) = …' when the preconditioner is a MUMPS factorisation that failed,
+    else ''."""
+    factor = failed_mumps_factor(ksp)
+    if factor is None:
         return ""
+    code, detail = factor.getMumpsInfog(1), factor.getMumpsInfog(2)
     meaning = MUMPS_ERRORS.get(code, "see the MUMPS user guide")
     return f"; MUMPS INFOG(1) = {code}, INFOG(2) = {detail}: {meaning}"
 
