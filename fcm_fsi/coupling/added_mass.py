@@ -232,12 +232,13 @@ class AddedMassStage:
         """Whether m̃ comes from the flow's added-mass tensor (``added_mass_model`` potential or tensor)."""
         return self.model in ("potential", "tensor")
 
-    def update(self, t: float, labels: np.ndarray, same_poses: bool = False) -> None:
+    def update(self, t: float, labels: np.ndarray | None, same_poses: bool = False) -> None:
         """m̃_b = C_a ρ̄_b V_b with ρ̄_b the mean fluid density on block b's wetted (cut)
         surface, so a block in air carries C_a ρ_air V_b, not the water's (with the water's,
         the lagged m̃ aⁿ term turned floor-contact chatter into a load of several times the
         weight of a block resting in air); 0 for blocks without cut surface and fixed blocks;
-        or from the flow (:meth:`_potential_added_mass`, ``labels`` the moving groups).
+        or from the flow (:meth:`_potential_added_mass`, ``labels`` the moving groups; only then
+        needed).
         Raises the DEM mass and inertia (by Ĩ = m̃ k², k the fluid-seen shape's radius of
         gyration) for the coming sub-steps. ``same_poses``: a later pass of the implicit
         coupling, whose flow-computed m̃ is the first pass's (same cut and clusters; φ inside

@@ -560,7 +560,8 @@ class CoupledModel:
             if self.hidden is not None:
                 self._hidden_load(centres)
             fluid_side = self._wall_momentum()
-            self.added.update(self.ns.t, self._cluster_labels(), same_poses=retake)
+            labels = self._cluster_labels() if self.added.from_flow else None   # the flow's groups only
+            self.added.update(self.ns.t, labels, same_poses=retake)
         with timer("dem sub-steps"):
             # the last step before t_end may be a fraction of run.dt: take whole DEM steps no
             # longer than dem.dt that fill it exactly
