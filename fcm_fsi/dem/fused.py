@@ -37,7 +37,7 @@ def _advance_range(b0, b1, blk_sph_start, sph_pos, sph_radius, sph_material, sph
                    pos, quat, vel, omega, angmom, mass, inv_mass, inertia, fixed, ext_force, ext_torque, gravity,
                    sp_start, sp_pair, sp_sign, act, pair_f, pair_x,
                    planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, whist, wheld, wtab, clip,
-                   dt, force, torque):
+                   planar, dt, force, torque):
     e_s = 0.0
     d_d = 0.0
     d_f = 0.0
@@ -60,7 +60,7 @@ def _advance_range(b0, b1, blk_sph_start, sph_pos, sph_radius, sph_material, sph
         for d in range(3):
             torque[b, d] += ext_torque[b, d]
         if not fixed[b]:
-            _kick_block(b, vel, angmom, mass, inv_mass, force, torque, dt)
+            _kick_block(b, vel, angmom, mass, inv_mass, force, torque, planar, dt)
             _drift_block(b, pos, quat, vel, angmom, omega, inertia, dt)
         _place_block_spheres(b, pos, quat, blk_sph_start, sph_local, sph_pos)
     return e_s, d_d, d_f
@@ -71,10 +71,11 @@ def advance_blocks(blk_sph_start, sph_pos, sph_radius, sph_material, sph_local,
                    pos, quat, vel, omega, angmom, mass, inv_mass, inertia, fixed, ext_force, ext_torque, gravity,
                    sp_start, sp_pair, sp_sign, act, pair_f, pair_x,
                    planes, plane_mat, tris, tri_mesh, mesh_mat, nmesh, active, whist, wheld, wtab, clip,
-                   dt, force, torque):
+                   planar, dt, force, torque):
     """Forces (pair gather, walls, gravity, external), kick, drift and sphere positions of
     every block (module docstring). force/torque receive this step's totals (as
-    ``DEMSystem.force``/``torque`` on the stage-by-stage path). Returns the walls' (spring
+    ``DEMSystem.force``/``torque`` on the stage-by-stage path); ``planar`` as in
+    ``integrate.kick``. Returns the walls' (spring
     energy, dashpot loss, slider loss)."""
     nbk = pos.shape[0]
     nch = min(CHUNKS, nbk)
@@ -83,7 +84,7 @@ def advance_blocks(blk_sph_start, sph_pos, sph_radius, sph_material, sph_local,
         r = _advance_range(c * nbk // nch, (c + 1) * nbk // nch, blk_sph_start, sph_pos, sph_radius, sph_material,
                            sph_local, pos, quat, vel, omega, angmom, mass, inv_mass, inertia, fixed, ext_force, ext_torque,
                            gravity, sp_start, sp_pair, sp_sign, act, pair_f, pair_x, planes, plane_mat, tris,
-                           tri_mesh, mesh_mat, nmesh, active, whist, wheld, wtab, clip, dt, force, torque)
+                           tri_mesh, mesh_mat, nmesh, active, whist, wheld, wtab, clip, planar, dt, force, torque)
         part[c, 0] = r[0]
         part[c, 1] = r[1]
         part[c, 2] = r[2]

@@ -51,18 +51,20 @@ def _omega_world(q, L, inertia_b, out):
 
 
 @nb.njit(cache=True, parallel=True)
-def kick(vel, angmom, mass, inv_mass, force, torque, fixed, dt):
+def kick(vel, angmom, mass, inv_mass, force, torque, fixed, planar, dt):
     """v += Δt F/m, L += Δt T for every free block; with ``inv_mass`` (nb, 3, 3) (not empty)
     v += Δt (inv_mass F): a translational inertia tensor (a block with its fluid's added-mass
-    tensor, ``coupling.added_mass_model: tensor``); empty (0, 3, 3): the scalar ``mass``."""
+    tensor, ``coupling.added_mass_model: tensor``); empty (0, 3, 3): the scalar ``mass``.
+    ``planar``: the blocks move in the plane z = const (a 2D fluid's prisms): v_z = 0 and
+    L_x = L_y = 0 after the kick (z must be a principal axis of every block)."""
     for b in nb.prange(vel.shape[0]):
         if fixed[b]:
             continue
-        _kick_block(b, vel, angmom, mass, inv_mass, force, torque, dt)
+        _kick_block(b, vel, angmom, mass, inv_mass, force, torque, planar, dt)
 
 
 @nb.njit(cache=True, inline="always")
-def _kick_block(b, vel, angmom, mass, inv_mass, force, torque, dt):
+def _kick_block(b, vel, angmom, mass, inv_mass, force, torque, planar, dt):
     if inv_mass.shape[0] > 0:
         f0, f1, f2 = force[b, 0], force[b, 1], force[b, 2]
         for d in range(3):
@@ -72,6 +74,10 @@ def _kick_block(b, vel, angmom, mass, inv_mass, force, torque, dt):
             vel[b, d] += dt * force[b, d] / mass[b]
     for d in range(3):
         angmom[b, d] += dt * torque[b, d]
+    if planar:
+        vel[b, 2] = 0.0
+        angmom[b, 0] = 0.0
+        angmom[b, 1] = 0.0
 
 
 @nb.njit(cache=True)

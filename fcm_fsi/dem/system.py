@@ -68,8 +68,10 @@ class DEMSystem:
     """Advance a :class:`DEMState` under a list of interactions (see package docstring)."""
 
     def __init__(self, state: DEMState, interactions: list, dt: float, gravity=(0.0, 0.0, -9.81),
-                 controls: Controls | None = None, with_ledger: bool = True):
+                 controls: Controls | None = None, with_ledger: bool = True, planar: bool = False):
         self.state = state
+        #: the blocks move in the plane z = const (the prisms of a 2D fluid): v_z, ω_x, ω_y held at 0
+        self.planar = bool(planar)
         self.interactions = list(interactions)
         self.dt = float(dt)
         self.gravity = np.asarray(gravity, np.float64)
@@ -135,7 +137,7 @@ class DEMSystem:
                                     st.pos, st.quat, st.vel, st.omega, st.angmom, st.mass, self.inv_mass, st.inertia, st.fixed,
                                     st.ext_force, st.ext_torque, self.gravity,
                                     nl.sp_start, nl.sp_pair, nl.sp_sign, contact.act, contact.pair_f, contact.pair_x,
-                                    *wargs, clip, dt, self.force, self.torque)
+                                    *wargs, clip, self.planar, dt, self.force, self.torque)
         led[L_SPRING] += es
         led[L_DASHPOT] += dd
         led[L_FRICTION] += df
@@ -153,7 +155,7 @@ class DEMSystem:
             self.vel_prev[:] = st.vel
             self.angmom_prev[:] = st.angmom
             vm, Lm = self.vel_prev, self.angmom_prev
-        kick(st.vel, st.angmom, st.mass, self.inv_mass, self.force, self.torque, st.fixed, dt)
+        kick(st.vel, st.angmom, st.mass, self.inv_mass, self.force, self.torque, st.fixed, self.planar, dt)
         if self.controls is not None:
             self.controls.enforce(st, dt)
         if self.ledger is not None:

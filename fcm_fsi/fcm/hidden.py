@@ -52,13 +52,13 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from dolfinx import geometry
 from mpi4py import MPI
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from .levelset import BOX, CYLINDER, SPHERE, Shapes, signed_distance_reference
+from .locate import NearPairs, PointLocator
 
 #: ``cut_owner`` of a cell that Γ does not cut (any body's sample in it may be wetted)
 NOT_CUT = -9
@@ -292,33 +292,53 @@ def interpolate_hidden(hidden: np.ndarray, values: np.ndarray, conductance: sp.s
         L = sp.diags(np.asarray(A.sum(axis=1)).ravel() + to_wet[reached]) - A
         rhs = B @ out[W]
         solver = LaplaceSolver() if solver is None else solver
-        out[H[reached]] = solver.solve(L.tocsr(), rhs.reshape(len(rhs), -1)).reshape(rhs.shape)
+        out[H[reached]] = solver.solve(L.tocsr(), rhs.reshape(len(rhs), -1), H[reached]).reshape(rhs.shape)
     return out
 
 
 #: a contact link between hidden samples of two bodies stays while they are closer than this ×
 #: the reach that made it
 LINK_HYSTERESIS = 1.1
+#: the candidates for contact links are searched to this × the reach beyond the links' range
+CONTACT_MARGIN = 0.5
 
-#: graph Laplacians with more unknowns than this are solved by CG + algebraic multigrid, smaller
-#: ones by sparse LU (whose fill-in makes the 10⁵ hidden samples of a building's joints slow)
+#: graph Laplacians with more unknowns than this are solved by preconditioned CG, smaller ones by
+#: sparse LU (whose fill-in makes the 10⁵ hidden samples of a building's joints slow)
 DIRECT_LIMIT = 5000
+#: the CG preconditioner of the larger graph Laplacians, and the tolerance relative to ‖rhs‖
+GRAPH_PC = "icc"
+GRAPH_RTOL = 1e-10
 
 
 class LaplaceSolver:
     """L x = rhs for the SPD graph Laplacian ``L`` of the hidden samples (Dirichlet rows of the
     mouths eliminated), one column of ``rhs`` (n, k) at a time; each rank solves the same
-    (replicated) system. Small systems by sparse LU; larger ones by CG + BoomerAMG, whose
-    multigrid hierarchy is kept while the graph's links stay the same (a structure at rest:
-    only the conductances' values and the mouths' pressures change from step to step), each
-    solve starting from the last solution of its column."""
+    (replicated) system. Small systems by sparse LU; larger ones by preconditioned CG
+    (:data:`GRAPH_PC`), whose preconditioner is kept while the graph's links stay the same (a
+    structure at rest: only the conductances' values and the mouths' pressures change from
+    step to step). Each solve starts from the last solution of the same samples (``ids``, their
+    indices among all samples; samples new to the hidden set from the mean of the last
+    solution): the hidden set changes by a few samples at the mouths from step to step, and
+    the solution changes little."""
 
     def __init__(self) -> None:
-        self._pattern = None         # (indptr, indices) of the matrix the hierarchy was built for
+        self._pattern = None         # (indptr, indices) of the matrix the preconditioner was built for
         self._ksp = self._A = None
+        self._last_ids = None        # sample indices of the last solve (sorted)
         self._last = None            # (n, k) last solutions
 
-    def solve(self, L: sp.csr_matrix, rhs: np.ndarray) -> np.ndarray:
+    def _guess(self, ids: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray | None:
+        """The last solution at ``ids`` (the mean of the last solution where a sample is new)."""
+        if self._last is None or self._last.shape[1] != shape[1]:
+            return None
+        if ids is None:
+            return self._last if self._last.shape == shape else None
+        at = np.searchsorted(self._last_ids, ids)
+        at = np.minimum(at, len(self._last_ids) - 1)
+        known = self._last_ids[at] == ids
+        return np.where(known[:, None], self._last[at], self._last.mean(axis=0)[None, :])
+
+    def solve(self, L: sp.csr_matrix, rhs: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
         if L.shape[0] <= DIRECT_LIMIT:
             return np.reshape(spsolve(L.tocsc(), rhs), rhs.shape)
         from petsc4py import PETSc
@@ -330,39 +350,43 @@ class LaplaceSolver:
             self._A.setValuesCSR(L.indptr.astype(PETSc.IntType), L.indices.astype(PETSc.IntType), L.data)
             self._A.assemble()
         else:
-            self.destroy()
+            for obj in (self._ksp, self._A):
+                if obj is not None:
+                    obj.destroy()
             self._A = PETSc.Mat().createAIJ(size=L.shape, csr=(L.indptr.astype(PETSc.IntType),
                                                                L.indices.astype(PETSc.IntType), L.data),
                                             comm=PETSc.COMM_SELF)
             self._ksp = PETSc.KSP().create(PETSc.COMM_SELF)
             self._ksp.setType("cg")
-            self._ksp.getPC().setType("hypre")
-            self._ksp.setTolerances(rtol=1e-10, atol=0.0, max_it=500)
+            self._ksp.getPC().setType(GRAPH_PC)
+            self._ksp.setTolerances(rtol=GRAPH_RTOL, atol=0.0, max_it=2000)
             self._pattern = (L.indptr.copy(), L.indices.copy())
-            self._last = None
         ksp = self._ksp
         ksp.setOperators(self._A)
         ksp.getPC().setReusePreconditioner(same)
-        warm = self._last is not None and self._last.shape == rhs.shape
-        ksp.setInitialGuessNonzero(warm)
+        guess = self._guess(ids, rhs.shape)
+        ksp.setInitialGuessNonzero(guess is not None)
         x, b = self._A.createVecs()
         out = np.empty_like(rhs)
+        self.iterations = 0
         for k in range(rhs.shape[1]):
             b.array[:] = rhs[:, k]
-            x.array[:] = self._last[:, k] if warm else 0.0
+            x.array[:] = guess[:, k] if guess is not None else 0.0
             ksp.solve(b, x)
             if ksp.getConvergedReason() <= 0:
                 raise RuntimeError(f"hidden-surface pressure: CG did not converge ({ksp.getConvergedReason()})")
+            self.iterations += ksp.getIterationNumber()
             out[:, k] = x.array
         x.destroy(), b.destroy()
         self._last = out.copy()
+        self._last_ids = None if ids is None else np.asarray(ids).copy()
         return out
 
     def destroy(self) -> None:
         for obj in (self._ksp, self._A):
             if obj is not None:
                 obj.destroy()
-        self._ksp = self._A = self._pattern = self._last = None
+        self._ksp = self._A = self._pattern = self._last = self._last_ids = None
 
 
 def hidden_pressure(hidden: np.ndarray, p: np.ndarray, rho: np.ndarray, gx: np.ndarray,
@@ -385,8 +409,6 @@ class HiddenSurface:
                  probe: float = 0.0) -> None:
         self.mesh, self.comm, self.nb = mesh, mesh.comm, int(nbodies)
         self.dim = mesh.topology.dim
-        self.tree = geometry.BoundingBoxTree(mesh, self.dim)
-        self.n_owned = mesh.topology.index_map(self.dim).size_local
         x, n, w, graphs, body = [], [], [], [], []
         for b in np.unique(shapes.body[shapes.body >= 0]):
             xb, nb_, wb, cb = body_samples(shapes, int(b), spacing, self.dim)
@@ -403,16 +425,22 @@ class HiddenSurface:
         self.bridged = np.concatenate(crease) < bridge if crease else np.zeros(0, bool)
         self.conductance = sp.block_diag(graphs, format="csr") if graphs else sp.csr_matrix((0, 0))
         self.spacing = float(spacing)
+        self.locator = PointLocator(mesh, 2 * len(self.weight))   # the samples, then their probe points
         self.solver = LaplaceSolver()                # the hidden samples' graph, kept between steps
         self.probe = float(probe)                    # [m] how far out a hidden sample looks for open fluid
         self.hidden_measure = np.zeros(self.nb)      # hidden length [m] (2D) or area [m²] (3D) per body, last call
         self.unreached = 0                           # bodies with hidden samples no mouth reaches, last call
         self.last = {}                               # the samples of the last call, for plots
         self._links = np.zeros(0, np.int64)          # contact links (i n + j, i < j) of the last call
+        # candidate pairs of samples of different bodies for the links, searched again for a body
+        # only when it has moved CONTACT_MARGIN / 2 reaches
+        reach = GRAPH_REACH * self.spacing
+        self.near = NearPairs(self.body, LINK_HYSTERESIS * reach, CONTACT_MARGIN * reach)
 
-    def _values(self, functions, points: np.ndarray, body: np.ndarray, cut_owner: np.ndarray,
+    def _values(self, functions, points: np.ndarray, slots: np.ndarray, body: np.ndarray, cut_owner: np.ndarray,
                 solid: np.ndarray, filled: np.ndarray, bridged: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(len(functions), n) values at ``points`` (n, 3) on every rank, NaN outside the
+        """(len(functions), n) values at ``points`` (n, 3) (their slots in :attr:`locator`:
+        the samples' indices, n_samples + index for their probe points) on every rank, NaN outside the
         mesh, and per point whether the fluid does not reach it: outside the mesh, every cell
         containing it solid (``solid``, local cells: no vertex in the fluid; for the points
         flagged ``bridged``, near a clump's crease, only solid cells with a vertex the fill sets,
@@ -422,12 +450,7 @@ class HiddenSurface:
         NOT_CUT for the cells Γ does not cut). Owned cells only, summed over the ranks: the
         same on any partition."""
         n = len(points)
-        cands = geometry.compute_collisions(self.tree, points)
-        cells = geometry.compute_colliding_cells(self.mesh, cands, points)
-        point = np.repeat(np.arange(n), np.diff(cells.offsets))
-        cell = cells.array
-        owned = cell < self.n_owned
-        point, cell = point[owned], cell[owned]
+        point, cell = self.locator.locate(slots, points)
         foreign = (cut_owner[cell, 0] != NOT_CUT) & (cut_owner[cell, 0] != body[point]) \
             & (cut_owner[cell, 1] != body[point])
         counts = np.zeros((4, n))
@@ -459,18 +482,10 @@ class HiddenSurface:
         the others. Conductance 1/max(distance, spacing/2)² (coincident faces: the same
         pressure on both). A link of the last call stays up to :data:`LINK_HYSTERESIS` × the
         reach, so that samples at the reach of a structure that only trembles do not change
-        the graph's links from step to step (its multigrid hierarchy is then kept)."""
-        idx = np.flatnonzero(hidden)
+        the graph's links from step to step (its preconditioner is then kept)."""
         n = len(xw)
-        if idx.size < 2:
-            self._links = np.zeros(0, np.int64)
-            return sp.csr_matrix((n, n))
         reach = GRAPH_REACH * self.spacing
-        pairs = cKDTree(xw[idx]).query_pairs(LINK_HYSTERESIS * reach, output_type="ndarray")
-        i, j = idx[pairs[:, 0]], idx[pairs[:, 1]]
-        other = self.body[i] != self.body[j]
-        i, j = np.minimum(i[other], j[other]), np.maximum(i[other], j[other])
-        d2 = np.sum((xw[i] - xw[j]) ** 2, axis=1)
+        i, j, d2 = self.near.pairs(xw, hidden)
         key = i * n + j
         keep = (d2 <= reach * reach) | np.isin(key, self._links)
         i, j, d2 = i[keep], j[keep], d2[keep]
@@ -502,7 +517,8 @@ class HiddenSurface:
         if self.dim == 2:
             xw[:, 2], nw[:, 2] = 0.0, 0.0
         fns = (share, pressure) + (() if np.isscalar(density) else (density,))
-        vals, whole = self._values(fns, xw, self.body, cut_owner, solid, filled, self.bridged)
+        ns = len(xw)
+        vals, whole = self._values(fns, xw, np.arange(ns), self.body, cut_owner, solid, filled, self.bridged)
         rho = np.full(len(xw), float(density)) if np.isscalar(density) else np.nan_to_num(vals[2])
         hidden = whole | (np.nan_to_num(vals[0]) >= 1.0 - 1e-9)
         g = np.asarray(gravity, float)[: self.dim]
@@ -515,7 +531,7 @@ class HiddenSurface:
             # fill's: the side of a wall inside the fill's corner at the floor) is wetted, with
             # the static pressure there moved hydrostatically to it
             probe = xw[cand] + self.probe * nw[cand]
-            pv, closed = self._values(fns, probe, self.body[cand], cut_owner, solid, filled)
+            pv, closed = self._values(fns, probe, ns + cand, self.body[cand], cut_owner, solid, filled)
             facing = ~closed & np.isfinite(pv[1]) & (np.nan_to_num(pv[0]) < 1.0 - 1e-9)
             idx = cand[facing]
             rho_probe = np.full(len(cand), float(density)) if np.isscalar(density) else np.nan_to_num(pv[2])

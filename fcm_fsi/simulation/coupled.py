@@ -103,6 +103,7 @@ class CoupledModel:
             block_faces = FaceDistance(shapes, st.pos, st.quat)
         self.mesh = build_mesh(case.mesh, comm, case_dir, face_distance=block_faces)
         self.gdim = self.mesh.geometry.dim
+        self.system.planar = self.gdim == 2          # a 2D fluid sees the blocks as prisms moving in its plane
         # uncut cells: the Navier–Stokes forms' own rule (exact for their polynomial parts)
         plain_degree = quadrature_degree(case.fluid, field_properties=case.phase_field is not None)
         self.cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, wall=cp.wall,

@@ -140,13 +140,32 @@ def test_kick_with_an_inverse_mass_tensor_matches_numpy():
     inv = np.linalg.inv(st.mass[:, None, None] * np.eye(3)[None] + M)
     vel, ang = st.vel.copy(), L.copy()
     F, T = rng.normal(size=st.pos.shape), rng.normal(size=st.pos.shape)
-    kick(vel, ang, st.mass, inv, F, T, st.fixed, 1e-3)
+    kick(vel, ang, st.mass, inv, F, T, st.fixed, False, 1e-3)
     free = ~st.fixed
     ref = st.vel + 1e-3 * np.einsum("bij,bj->bi", inv, F)
     np.testing.assert_allclose(vel[free], ref[free], rtol=1e-13, atol=1e-16)
     np.testing.assert_allclose(ang[free], (L + 1e-3 * T)[free], rtol=1e-14)
     np.testing.assert_array_equal(vel[~free], st.vel[~free])
     assert np.abs(vel - (st.vel + 1e-3 * F / st.mass[:, None]))[free].max() > 1e-6   # not the scalar kick
+
+
+def test_planar_kick_holds_the_motion_in_the_plane():
+    """``planar`` (blocks coupled to a 2D fluid): the in-plane kick is the plain one, and v_z,
+    L_x, L_y are 0 afterwards whatever the load (no out-of-plane mode can grow from round-off)."""
+    st, rng = random_state()
+    L = rng.normal(size=(st.nb, 3)) * 1e-3
+    F, T = rng.normal(size=st.pos.shape), rng.normal(size=st.pos.shape)
+    inv = np.zeros((0, 3, 3))
+    v_plain, L_plain = st.vel.copy(), L.copy()
+    kick(v_plain, L_plain, st.mass, inv, F, T, st.fixed, False, 1e-3)
+    v_plane, L_plane = st.vel.copy(), L.copy()
+    kick(v_plane, L_plane, st.mass, inv, F, T, st.fixed, True, 1e-3)
+    free = ~st.fixed
+    np.testing.assert_array_equal(v_plane[free, :2], v_plain[free, :2])
+    np.testing.assert_array_equal(L_plane[free, 2], L_plain[free, 2])
+    assert np.all(v_plane[free, 2] == 0.0) and np.all(L_plane[free, :2] == 0.0)
+    assert np.abs(v_plain[free, 2]).min() > 0 and np.abs(L_plain[free, :2]).min() > 0
+    np.testing.assert_array_equal(v_plane[~free], st.vel[~free])
 
 
 def test_drift_and_kick_match_numpy_reference():
@@ -156,7 +175,7 @@ def test_drift_and_kick_match_numpy_reference():
     pos, quat, vel, ang = st.pos.copy(), st.quat.copy(), st.vel.copy(), L.copy()
     omega = np.zeros_like(pos)
     F, T = rng.normal(size=pos.shape), rng.normal(size=pos.shape)
-    kick(vel, ang, st.mass, np.zeros((0, 3, 3)), F, T, st.fixed, 1e-3)
+    kick(vel, ang, st.mass, np.zeros((0, 3, 3)), F, T, st.fixed, False, 1e-3)
     free = ~st.fixed
     np.testing.assert_allclose(vel[free], (st.vel + 1e-3 * F / st.mass[:, None])[free], rtol=1e-14)
     np.testing.assert_allclose(ang[free], (L + 1e-3 * T)[free], rtol=1e-14)

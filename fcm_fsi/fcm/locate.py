@@ -1,0 +1,134 @@
+"""The owned mesh cells that contain moving points, kept between calls.
+
+The hidden-surface closure (fcm/hidden.py) evaluates fields at the surface samples of every
+block, and at points a little way out from them, at every fluid step. The blocks of a
+standing structure hardly move, so almost every point stays in the cell that held it at the
+last call. :class:`PointLocator` keeps, per point (a *slot*: the caller's stable index of
+the point, e.g. its sample number), the one owned cell that held it strictly inside; at the
+next call a point that is still strictly inside that cell (every barycentric coordinate
+above :data:`INSIDE`) keeps it, and only the others are searched in the bounding-box tree
+(dolfinx ``compute_colliding_cells``). A point strictly inside a cell lies in no other cell
+(the cells do not overlap, and dolfinx's contact tolerance is far below :data:`INSIDE` × the
+cell's height), so the result is the search's result; points on or near a face, edge or
+vertex (several cells hold them) and points outside every cell are searched at every call.
+"""
+from __future__ import annotations
+
+import numpy as np
+from dolfinx import geometry
+from mpi4py import MPI
+
+#: a point whose barycentric coordinates in a cell all exceed this lies strictly inside it
+INSIDE = 1e-6
+
+
+class PointLocator:
+    """Cells of ``mesh`` (simplices) holding points, for ``nslots`` point slots. Collective
+    (:meth:`locate`): the ranks agree on which points are searched again."""
+
+    def __init__(self, mesh, nslots: int) -> None:
+        self.mesh, self.comm = mesh, mesh.comm
+        self.dim = mesh.topology.dim
+        self.tree = geometry.BoundingBoxTree(mesh, self.dim)
+        self.n_owned = mesh.topology.index_map(self.dim).size_local
+        x = mesh.geometry.x[:, : self.dim]
+        dofs = mesh.geometry.dofmap.array.reshape(-1, self.dim + 1)[: self.n_owned]
+        self._origin = x[dofs[:, 0]]                                       # (n_owned, dim)
+        edges = np.stack([x[dofs[:, k]] - self._origin for k in range(1, self.dim + 1)], axis=2)
+        self._inverse = np.linalg.inv(edges)                               # (n_owned, dim, dim)
+        self._cell = np.full(int(nslots), -1, np.int64)                    # owned cell held strictly, or −1
+        self._kept = np.zeros(int(nslots), bool)                           # some rank holds it strictly
+        self.searched = 0                                                  # points searched at the last call
+
+    def strictly_inside(self, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """Whether ``points`` (n, 3) lie strictly inside the owned ``cells`` (n,)."""
+        if len(cells) == 0:
+            return np.zeros(0, bool)
+        lam = np.einsum("nij,nj->ni", self._inverse[cells], points[:, : self.dim] - self._origin[cells])
+        return (lam.min(axis=1) > INSIDE) & (1.0 - lam.sum(axis=1) > INSIDE)
+
+    def locate(self, slots: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(point, cell): every pair of a point of ``points`` (n, 3) and an owned cell of this
+        rank containing it (as dolfinx's search would give them, filtered to owned cells);
+        ``slots`` (n,) the points' slots."""
+        slots = np.asarray(slots, np.int64)
+        n = len(points)
+        cached = self._kept[slots]
+        mine = np.flatnonzero(self._cell[slots] >= 0)
+        moved = np.zeros(n, np.int8)
+        moved[mine[~self.strictly_inside(points[mine], self._cell[slots[mine]])]] = 1
+        self.comm.Allreduce(MPI.IN_PLACE, moved, op=MPI.MAX)                # left its cell on its rank
+        moved = moved.astype(bool)
+        search = np.flatnonzero(~cached | moved)
+        self.searched = int(search.size)
+        keep = np.flatnonzero(cached & ~moved)
+        keep = keep[self._cell[slots[keep]] >= 0]
+        pts = np.ascontiguousarray(points[search], dtype=np.float64)
+        cands = geometry.compute_collisions(self.tree, pts)
+        found = geometry.compute_colliding_cells(self.mesh, cands, pts)
+        point = search[np.repeat(np.arange(len(search)), np.diff(found.offsets))]
+        cell = found.array.astype(np.int64)
+        owned = cell < self.n_owned
+        point, cell = point[owned], cell[owned]
+        # the searched points strictly inside one of this rank's cells are kept from now on
+        strict = self.strictly_inside(points[point], cell)
+        s = slots[search]
+        self._cell[s] = -1
+        self._cell[slots[point[strict]]] = cell[strict]
+        held = np.zeros(n, np.int8)
+        held[point[strict]] = 1
+        self.comm.Allreduce(MPI.IN_PLACE, held, op=MPI.MAX)
+        held = held.astype(bool)
+        self._kept[s] = held[search]
+        return np.concatenate([keep, point]), np.concatenate([self._cell[slots[keep]], cell])
+
+
+class NearPairs:
+    """Pairs of points of different bodies closer than ``radius`` [m], kept between calls:
+    the candidates within ``radius`` + ``margin`` are searched for a body only when one of its
+    points has moved more than ``margin``/2 since they were searched (then no pair of points
+    can have come closer than ``radius`` unnoticed), so a structure at rest is searched once.
+    ``body`` (n,): each point's body."""
+
+    def __init__(self, body: np.ndarray, radius: float, margin: float) -> None:
+        self.body = np.asarray(body, np.int64)
+        self.radius, self.margin = float(radius), float(margin)
+        self._x = None                      # (n, 3) the points when their body's pairs were searched
+        self._i = self._j = np.zeros(0, np.int64)
+        self.searched_bodies = 0            # bodies searched again at the last call
+
+    def pairs(self, x: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(i, j, d²) with i < j, of the ``active`` points (n,) of different bodies closer than
+        ``radius`` at ``x`` (n, 3)."""
+        from scipy.spatial import cKDTree
+        nb = int(self.body.max(initial=-1)) + 1
+        if self._x is None:
+            moved = np.ones(nb, bool)
+        else:
+            shift = np.linalg.norm(x - self._x, axis=1)
+            far = np.zeros(nb)
+            np.maximum.at(far, self.body, shift)
+            moved = far > 0.5 * self.margin
+        self.searched_bodies = int(np.count_nonzero(moved))
+        if moved.any():
+            stale = moved[self.body[self._i]] | moved[self.body[self._j]]
+            i, j = self._i[~stale], self._j[~stale]
+            mine = np.flatnonzero(moved[self.body])
+            hits = cKDTree(x[mine]).sparse_distance_matrix(cKDTree(x), self.radius + self.margin,
+                                                           output_type="ndarray")
+            ni, nj = mine[hits["i"]], hits["j"].astype(np.int64)
+            cross = self.body[ni] != self.body[nj]
+            a, b = np.minimum(ni[cross], nj[cross]), np.maximum(ni[cross], nj[cross])
+            new = np.unique(a * len(x) + b)             # a pair of two moved bodies is found twice
+            self._i = np.concatenate([i, new // len(x)])
+            self._j = np.concatenate([j, new % len(x)])
+            if self._x is None:
+                self._x = x.copy()
+            else:
+                self._x[moved[self.body]] = x[moved[self.body]]
+        i, j = self._i, self._j
+        on = active[i] & active[j]
+        i, j = i[on], j[on]
+        d2 = np.sum((x[i] - x[j]) ** 2, axis=1)
+        close = d2 <= self.radius * self.radius
+        return i[close], j[close], d2[close]
