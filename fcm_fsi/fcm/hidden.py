@@ -312,8 +312,9 @@ GRAPH_RTOL = 1e-10
 
 class LaplaceSolver:
     """L x = rhs for the SPD graph Laplacian ``L`` of the hidden samples (Dirichlet rows of the
-    mouths eliminated), one column of ``rhs`` (n, k) at a time; each rank solves the same
-    (replicated) system. Small systems by sparse LU; larger ones by preconditioned CG
+    mouths eliminated), one column of ``rhs`` (n, k) at a time; every rank holds the same
+    (replicated) system. Small systems by sparse LU on every rank; larger ones by preconditioned CG,
+    column j on rank j mod size of ``comm`` (the same arithmetic on any number of ranks)
     (:data:`GRAPH_PC`), whose preconditioner is kept while the graph's links stay the same (a
     structure at rest: only the conductances' values and the mouths' pressures change from
     step to step). Each solve starts from the last solution of the same samples (``ids``, their
@@ -321,7 +322,8 @@ class LaplaceSolver:
     solution): the hidden set changes by a few samples at the mouths from step to step, and
     the solution changes little."""
 
-    def __init__(self) -> None:
+    def __init__(self, comm=None) -> None:
+        self.comm = comm
         self._pattern = None         # (indptr, indices) of the matrix the preconditioner was built for
         self._ksp = self._A = None
         self._last_ids = None        # sample indices of the last solve (sorted)
@@ -341,6 +343,20 @@ class LaplaceSolver:
     def solve(self, L: sp.csr_matrix, rhs: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
         if L.shape[0] <= DIRECT_LIMIT:
             return np.reshape(spsolve(L.tocsc(), rhs), rhs.shape)
+        rank, size = (0, 1) if self.comm is None else (self.comm.rank, self.comm.size)
+        columns = range(rank, rhs.shape[1], size)
+        out = np.zeros_like(rhs)
+        self.iterations = 0
+        if len(columns):
+            self._solve_columns(L, rhs, ids, columns, out)
+        if size > 1:
+            self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+        self._last = out.copy()
+        self._last_ids = None if ids is None else np.asarray(ids).copy()
+        return out
+
+    def _solve_columns(self, L: sp.csr_matrix, rhs: np.ndarray, ids, columns, out: np.ndarray) -> None:
+        """CG for the ``columns`` of ``rhs`` into ``out``."""
         from petsc4py import PETSc
         L = sp.csr_matrix(L)
         L.sort_indices()
@@ -367,9 +383,7 @@ class LaplaceSolver:
         guess = self._guess(ids, rhs.shape)
         ksp.setInitialGuessNonzero(guess is not None)
         x, b = self._A.createVecs()
-        out = np.empty_like(rhs)
-        self.iterations = 0
-        for k in range(rhs.shape[1]):
+        for k in columns:
             b.array[:] = rhs[:, k]
             x.array[:] = guess[:, k] if guess is not None else 0.0
             ksp.solve(b, x)
@@ -378,9 +392,6 @@ class LaplaceSolver:
             self.iterations += ksp.getIterationNumber()
             out[:, k] = x.array
         x.destroy(), b.destroy()
-        self._last = out.copy()
-        self._last_ids = None if ids is None else np.asarray(ids).copy()
-        return out
 
     def destroy(self) -> None:
         for obj in (self._ksp, self._A):
@@ -426,7 +437,7 @@ class HiddenSurface:
         self.conductance = sp.block_diag(graphs, format="csr") if graphs else sp.csr_matrix((0, 0))
         self.spacing = float(spacing)
         self.locator = PointLocator(mesh, 2 * len(self.weight))   # the samples, then their probe points
-        self.solver = LaplaceSolver()                # the hidden samples' graph, kept between steps
+        self.solver = LaplaceSolver(self.comm)       # the hidden samples' graph, kept between steps
         self.probe = float(probe)                    # [m] how far out a hidden sample looks for open fluid
         self.hidden_measure = np.zeros(self.nb)      # hidden length [m] (2D) or area [m²] (3D) per body, last call
         self.unreached = 0                           # bodies with hidden samples no mouth reaches, last call

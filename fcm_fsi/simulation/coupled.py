@@ -62,9 +62,10 @@ from ..coupling.dem_side import (
 from ..coupling.fixed_point import accelerator
 from ..coupling.hidden_load import HiddenLoad
 from ..coupling.sealed_pockets import SealedPockets
+from ..coupling.wall_motion import WallMotion
 from ..dem.model import build_system
 from ..dem.walls import gap_walls
-from ..fcm.levelset import NO_SHAPE, FaceDistance, StructureLevelSet
+from ..fcm.levelset import FaceDistance, StructureLevelSet
 from ..fluid.cut_walls import CutDomain
 from ..fluid.navier_stokes import quadrature_degree
 from ..fluid.solvers import LinearSolveError
@@ -147,6 +148,8 @@ class CoupledModel:
                                           walls=gap_walls(case.dem, self.gdim))
         self.points = np.zeros((self.cut.nodes.shape[0], 3))
         self.points[:, : self.gdim] = self.cut.nodes[:, : self.gdim]
+        self.walls = WallMotion(cp, self.dem, self.bonds, self.levelset, self.points, self.gyration, self.mass0,
+                                self.inertia0, self.h_min, self.gdim)
         self.pockets = None                # coupling.vent_pockets / drain_pockets (coupling/sealed_pockets.py)
         self._phi_of_node = None           # phase-field dof at each mesh vertex (built on first use)
         self._plain_levelset = None        # the level set without the fill (vents, hidden pressure)
@@ -234,8 +237,8 @@ class CoupledModel:
         added mass of bonded clusters, the cluster's rigid acceleration, not the bonds' ringing."""
         st = self.system.state
         accel, alpha = self.added.accel, self.added.alpha
-        if self.added.from_flow and self._by_cluster():
-            X, A, Al = self._cluster_rigid(st.pos, accel, alpha)
+        if self.added.from_flow and self.walls.by_cluster:
+            X, A, Al = self.walls.cluster_rigid(st.pos, accel, alpha)
             accel, alpha = A + np.cross(Al, st.pos - X), Al
         return self.added.load(self.force, self.torque, accel, alpha)
 
@@ -280,16 +283,16 @@ class CoupledModel:
         set again, unless ``drain_pockets`` (the drain also resets the restored flow's pressure)."""
         if same_poses and self._pass_cut is not None and not self.case.coupling.drain_pockets:
             owner, stats = self._pass_cut
-            ubar = self._wall_velocity_at_nodes(owner, velocities)[0]
+            ubar = self.walls.at_nodes(owner, velocities)[0]
             self.v_rigid[self.v_of_node] = ubar
             self.cut.set_wall_velocity(ubar)
             return stats
         st = self.system.state
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
         if self.pockets is not None:
-            self.pockets.apply(level, owner, self.levelset, self._fill_free_to_part(owner), st.pos, st.quat,
+            self.pockets.apply(level, owner, self.levelset, self.walls.fill_free_to_part(owner), st.pos, st.quat,
                                self._node_density)
-        ubar, share = self._wall_velocity_at_nodes(owner, velocities)
+        ubar, share = self.walls.at_nodes(owner, velocities)
         self.v_fluid[self.v_of_node] = level > 0
         self.v_rigid[self.v_of_node] = ubar
         stats = self.cut.update(level, owner, ubar, share)
@@ -305,32 +308,6 @@ class CoupledModel:
             self.fluid.pf.interface_cell_weights = self.cut.fluid_fractions()
         return stats
 
-    def _wall_velocity_at_nodes(self, owner: np.ndarray, velocities=None):
-        """ū (n, gdim) [m/s] at the cut's nodes from the blocks' rigid motion (:meth:`_wall_motion`),
-        blended where shapes overlap (``load_split: shared``) and in the gap fill; and the shared
-        ownership (second owner, weight) or None."""
-        motion = self._wall_motion(velocities)
-        ubar = self._rigid_velocity(self.points, owner, motion)
-        share = None
-        if self.case.coupling.load_split == "shared":
-            share = self._shared_ownership(owner, motion, ubar)
-        fill = self.levelset.fill_other[:, 0] != NO_SHAPE     # the gap fill: its own blend (continuous ū)
-        if fill.any():
-            ubar[fill] = self._rigid_velocity(self.points[fill], owner[fill], motion,
-                                              self.levelset.fill_other[fill], self.levelset.fill_weight[fill])
-        return ubar, share
-
-    def _fill_free_to_part(self, owner: np.ndarray) -> np.ndarray:
-        """Per node: fill between owners free to part — one a moving block, not both blocks of
-        one bonded cluster (the nodes where a pocket's seal may open)."""
-        st, other = self.system.state, self.levelset.fill_other[:, 0]
-        cluster = self._bonded_labels()
-        bonded = (owner >= 0) & (other >= 0)
-        bonded[bonded] = cluster[owner[bonded]] == cluster[other[bonded]]
-        free = np.append(~st.fixed, False)          # moving blocks; index −1: static, wall, none
-        moving = free[np.where(owner >= 0, owner, -1)] | free[np.where(other >= 0, other, -1)]
-        return moving & ~bonded
-
     def _node_density(self) -> np.ndarray:
         """Fluid density [kg/m³] at the mesh vertices: from φ with a phase field, else the fluid's."""
         fl = self.case.fluid
@@ -339,69 +316,6 @@ class CoupledModel:
         if self._phi_of_node is None:
             self._phi_of_node = self.cut.node_map(self.fluid.pf.phi.function_space)
         return property_map(self.fluid.pf.phi.x.array[self._phi_of_node], fl.density, fl.gas_density)
-
-    def _shared_ownership(self, owner: np.ndarray, motion, ubar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``coupling.load_split: shared``: at each node the nearest other block (second owner)
-        and its weight w = max(0, ½ − (d₂ − d₁)/(2 h)), h = h_min the smallest cell diameter, d₁,
-        d₂ the two blocks' signed distances; blends ū in place to (1 − w) ū₁ + w ū₂, so load and
-        wall velocity are continuous where two blocks' shapes overlap or nearly touch."""
-        second = self.levelset.second_owner
-        w = np.clip(0.5 - self.levelset.owner_margin / (2.0 * self.h_min), 0.0, 0.5)
-        w = np.where((second >= 0) & (owner >= 0), w, 0.0)
-        blend = w > 0
-        if blend.any():
-            ubar[blend] = self._rigid_velocity(self.points[blend], owner[blend], motion, second[blend], w[blend])
-        return second, w
-
-    def _wall_motion(self, velocities=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(X, V, Ω) (nb, 3) per block, the rigid motion ū = V + Ω × (x − X) its wall nodes get:
-        the DEM's x_c, v, ω (``coupling.wall_velocity``) or ``velocities``, the iterated unknown;
-        with ``coupling.wall_motion: bonded_cluster`` the rigid motion of its bonded cluster."""
-        st = self.system.state
-        if velocities is None:
-            X, V, W = self.dem.motion(mean=self.case.coupling.wall_velocity == "mean")
-        else:
-            v = velocities.reshape(2 * self.nb, 3)
-            X, V, W = st.pos, v[: self.nb], v[self.nb:] / self.gyration[:, None]
-        if self._by_cluster():
-            X, V, W = self._cluster_rigid(X, V, W)
-        return X, V, W
-
-    def _by_cluster(self) -> bool:
-        """Whether the fluid sees bonded clusters (``coupling.wall_motion: bonded_cluster``)."""
-        return self.case.coupling.wall_motion == "bonded_cluster" and self.bonds is not None
-
-    def _cluster_labels(self) -> np.ndarray:
-        """(nb,) label of each block's cluster: blocks joined by intact bonds (each block its
-        own without ``wall_motion: bonded_cluster``)."""
-        return self._bonded_labels() if self._by_cluster() else np.arange(self.nb)
-
-    def _bonded_labels(self) -> np.ndarray:
-        """(nb,) label of each block's bonded cluster: blocks joined by intact bonds."""
-        if self.bonds is None:
-            return np.arange(self.nb)
-        from ..coupling.dem_side import bonded_clusters
-        first = np.unique(self.bonds.pt_bond, return_index=True)[1]      # one point per bond
-        intact = ~self.bonds.broken_bonds()[self.bonds.pt_bond[first]]
-        return bonded_clusters(self.nb, self.bonds.pt_a[first], self.bonds.pt_b[first], intact)
-
-    def _cluster_rigid(self, X, V, W):
-        """Per block, the rigid motion (or rigid acceleration: V, W = a, α) of its bonded cluster
-        (``dem_side.cluster_rigid_motion``)."""
-        from ..coupling.dem_side import cluster_rigid_motion
-        st = self.system.state
-        R = st.rotation_matrices()
-        inertia_world = np.einsum("bij,bj,bkj->bik", R, self.inertia0, R)
-        return cluster_rigid_motion(X, V, W, self.mass0, inertia_world, self._cluster_labels(), st.fixed)
-
-    def _rigid_velocity(self, points: np.ndarray, owner: np.ndarray, motion, other=None, weight=None) -> np.ndarray:
-        """Wall velocity (n, gdim) [m/s] at ``points`` of the blocks ``owner`` (0 where < 0) from
-        the per-block rigid ``motion`` (X, V, Ω) of :meth:`_wall_motion`; with ``other`` and
-        ``weight`` w, (1 − w) times it plus w times that of the blocks ``other``."""
-        from ..coupling.dem_side import blended_rigid_velocity, rigid_body_velocity
-        if other is None:
-            return rigid_body_velocity(*motion, points, owner)[:, : self.gdim]
-        return blended_rigid_velocity(*motion, points, owner, other, weight)[:, : self.gdim]
 
     def fluid_part_density(self, rho, rho_cell) -> None:
         """Cell-mean ρ of the PSPG test function over the cell's (weighted) fluid part, not
@@ -561,7 +475,7 @@ class CoupledModel:
             if self.hidden is not None:
                 self._hidden_load(centres)
             fluid_side = self._wall_momentum()
-            labels = self._cluster_labels() if self.added.from_flow else None   # the flow's groups only
+            labels = self.walls.cluster_labels() if self.added.from_flow else None   # the flow's groups only
             self.added.update(self.ns.t, labels, same_poses=retake)
         with timer("dem sub-steps"):
             # the last step before t_end may be a fraction of run.dt: take whole DEM steps no
@@ -595,14 +509,14 @@ class CoupledModel:
 
     def _block_velocities(self) -> np.ndarray:
         """The iterated unknown [m/s], flattened: per block the V and Ω × radius of gyration of
-        the rigid motion its wall nodes get (:meth:`_wall_motion`: with ``wall_velocity: mean``
+        the rigid motion its wall nodes get (coupling/wall_motion.WallMotion.motion: with ``wall_velocity: mean``
         the sub-steps' mean, with ``wall_motion: bonded_cluster`` its cluster's motion).
 
         Why not the end-of-step v, ω: the fluid never sees them in those modes, so iterating on
         them fed the fluid a velocity the explicit step does not (the end-of-step one) and
         measured the bonds' ringing, which no pass can converge (in the tsunami case with σ_c/4
         every step took the 6 passes allowed, residual 1e-4…3e-2)."""
-        _, V, W = self._wall_motion()
+        _, V, W = self.walls.motion()
         return np.concatenate([V, W * self.gyration[:, None]]).ravel()
 
     def _exchange_error(self, dt: float, stabilisation: np.ndarray, fluid_side: np.ndarray) -> float:

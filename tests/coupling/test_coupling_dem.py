@@ -370,32 +370,31 @@ def test_cluster_motion_keeps_momentum_and_angular_momentum_and_a_fixed_block_an
 
 
 def test_coupled_wall_motion_uses_the_intact_bonds_clusters():
-    """``CoupledModel._wall_motion`` with ``wall_motion: bonded_cluster``: blocks 0–1 joined by
-    an intact bond share their cluster's motion, block 2 (its bond to 1 broken) keeps its own;
+    """``WallMotion.motion`` with ``wall_motion: bonded_cluster``: blocks 0–1 joined by an
+    intact bond share their cluster's motion, block 2 (its bond to 1 broken) keeps its own;
     with ``block`` every block keeps its own."""
     from types import SimpleNamespace
 
-    from fcm_fsi.simulation.coupled import CoupledModel
+    from fcm_fsi.coupling.wall_motion import WallMotion
     cfg = dem_config([box_block(velocity=[1.0, 0.0, 0.0]), box_block(position=[0.3, 0.0, 0.0]),
                       box_block(position=[0.6, 0.0, 0.0], velocity=[0.0, 2.0, 0.0])], (0.0, 0.0, 0.0))
     system = build_system(cfg)
     st = system.state
     bonds = SimpleNamespace(pt_bond=np.array([0, 0, 1]), pt_a=np.array([0, 0, 1]), pt_b=np.array([1, 1, 2]),
                             broken_bonds=lambda: np.array([False, True]))
-    fake = SimpleNamespace(system=system, dem=DEMSubcycler(system), bonds=bonds, nb=3, mass0=st.mass.copy(),
-                           inertia0=st.inertia.copy(), gyration=np.ones(3),
-                           case=SimpleNamespace(coupling=SimpleNamespace(wall_velocity="end",
-                                                                         wall_motion="bonded_cluster")))
-    for name in ("_by_cluster", "_cluster_labels", "_bonded_labels", "_cluster_rigid"):      # the helpers it calls
-        setattr(fake, name, getattr(CoupledModel, name).__get__(fake))
-    X, V, W = CoupledModel._wall_motion(fake)
+    coupling = SimpleNamespace(wall_velocity="end", wall_motion="bonded_cluster", load_split="owner")
+    walls = WallMotion(coupling, DEMSubcycler(system), bonds, None, np.zeros((0, 3)), np.ones(3), st.mass.copy(),
+                       st.inertia.copy(), 0.01, 3)
+    X, V, W = walls.motion()
     np.testing.assert_allclose(V[0], [0.5, 0.0, 0.0])
     np.testing.assert_allclose(V[1], V[0])
     np.testing.assert_allclose(X[0], 0.5 * (st.pos[0] + st.pos[1]))
     np.testing.assert_array_equal(V[2], st.vel[2])
-    fake.case.coupling.wall_motion = "block"
-    X, V, W = CoupledModel._wall_motion(fake)
+    np.testing.assert_array_equal(walls.cluster_labels(), [0, 0, 1])
+    coupling.wall_motion = "block"
+    X, V, W = walls.motion()
     np.testing.assert_array_equal(V, st.vel)
+    np.testing.assert_array_equal(walls.cluster_labels(), [0, 1, 2])
 
 
 def test_a_coupled_run_whose_kinetic_energy_exceeds_what_the_system_has_stops():

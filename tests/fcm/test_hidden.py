@@ -179,6 +179,10 @@ def test_large_hidden_patches_are_solved_by_cg_to_the_direct_solution(monkeypatc
     np.testing.assert_allclose(amg, interpolate_hidden(hidden, values, C), rtol=1e-9)
     np.testing.assert_allclose(amg2, interpolate_hidden(hidden, values2, C2), rtol=1e-9)
     np.testing.assert_allclose(amg3, interpolate_hidden(hidden3, values2, C2), rtol=1e-9)
+    # the columns shared out over the ranks (column j on rank j mod size): the same numbers
+    shared = hidden_module.LaplaceSolver(MPI.COMM_WORLD)
+    monkeypatch.setattr(hidden_module, "DIRECT_LIMIT", 5000)
+    np.testing.assert_array_equal(interpolate_hidden(hidden, values, C, shared), amg)
 
 
 def resting_block(pose: str, refine: int = 1) -> dict:
