@@ -32,7 +32,10 @@ class PointLocator:
         self.tree = geometry.BoundingBoxTree(mesh, self.dim)
         self.n_owned = mesh.topology.index_map(self.dim).size_local
         x = mesh.geometry.x[:, : self.dim]
-        dofs = mesh.geometry.dofmap.array.reshape(-1, self.dim + 1)[: self.n_owned]
+        imap = mesh.topology.index_map(self.dim)
+        ncells = imap.size_local + imap.num_ghosts
+        # the first dim + 1 geometry nodes of a simplex are its vertices
+        dofs = mesh.geometry.dofmap.array.reshape(ncells, -1)[: self.n_owned, : self.dim + 1]
         self._origin = x[dofs[:, 0]]                                       # (n_owned, dim)
         edges = np.stack([x[dofs[:, k]] - self._origin for k in range(1, self.dim + 1)], axis=2)
         self._inverse = np.linalg.inv(edges)                               # (n_owned, dim, dim)
