@@ -68,10 +68,11 @@ class DEMSystem:
     """Advance a :class:`DEMState` under a list of interactions (see package docstring)."""
 
     def __init__(self, state: DEMState, interactions: list, dt: float, gravity=(0.0, 0.0, -9.81),
-                 controls: Controls | None = None, with_ledger: bool = True, planar: bool = False):
+                 controls: Controls | None = None, with_ledger: bool = True):
         self.state = state
-        #: the blocks move in the plane z = const (the prisms of a 2D fluid): v_z, ω_x, ω_y held at 0
-        self.planar = bool(planar)
+        #: the blocks move in the plane z = const (the prisms of a 2D fluid; set by the coupled
+        #: model once it knows the mesh's dimension): v_z, ω_x, ω_y held at 0
+        self.planar = False
         self.interactions = list(interactions)
         self.dt = float(dt)
         self.gravity = np.asarray(gravity, np.float64)

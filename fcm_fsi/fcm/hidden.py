@@ -58,7 +58,7 @@ from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
 from .levelset import BOX, CYLINDER, SPHERE, Shapes, signed_distance_reference
-from .locate import NearPairs, PointLocator
+from .locate import NearPairs, PointLocator, first_component_at
 
 #: ``cut_owner`` of a cell that Γ does not cut (any body's sample in it may be wetted)
 NOT_CUT = -9
@@ -313,14 +313,14 @@ GRAPH_RTOL = 1e-10
 class LaplaceSolver:
     """L x = rhs for the SPD graph Laplacian ``L`` of the hidden samples (Dirichlet rows of the
     mouths eliminated), one column of ``rhs`` (n, k) at a time; every rank holds the same
-    (replicated) system. Small systems by sparse LU on every rank; larger ones by preconditioned CG,
-    column j on rank j mod size of ``comm`` (the same arithmetic on any number of ranks)
-    (:data:`GRAPH_PC`), whose preconditioner is kept while the graph's links stay the same (a
-    structure at rest: only the conductances' values and the mouths' pressures change from
-    step to step). Each solve starts from the last solution of the same samples (``ids``, their
-    indices among all samples; samples new to the hidden set from the mean of the last
-    solution): the hidden set changes by a few samples at the mouths from step to step, and
-    the solution changes little."""
+    (replicated) system. Small systems by sparse LU on every rank; larger ones by CG with
+    :data:`GRAPH_PC`, column j on rank j mod size of ``comm`` (the same arithmetic on any number
+    of ranks), the preconditioner kept while the graph's links stay the same (a structure at
+    rest: only the conductances' values and the mouths' pressures change from step to step).
+    Each solve starts from the last solution of the same samples (``ids``, their indices among
+    all samples; samples new to the hidden set from the mean of the last solution): the hidden
+    set changes by a few samples at the mouths from step to step, and the solution changes
+    little."""
 
     def __init__(self, comm=None) -> None:
         self.comm = comm
@@ -366,9 +366,7 @@ class LaplaceSolver:
             self._A.setValuesCSR(L.indptr.astype(PETSc.IntType), L.indices.astype(PETSc.IntType), L.data)
             self._A.assemble()
         else:
-            for obj in (self._ksp, self._A):
-                if obj is not None:
-                    obj.destroy()
+            self._free_operator()
             self._A = PETSc.Mat().createAIJ(size=L.shape, csr=(L.indptr.astype(PETSc.IntType),
                                                                L.indices.astype(PETSc.IntType), L.data),
                                             comm=PETSc.COMM_SELF)
@@ -393,11 +391,15 @@ class LaplaceSolver:
             out[:, k] = x.array
         x.destroy(), b.destroy()
 
-    def destroy(self) -> None:
+    def _free_operator(self) -> None:
         for obj in (self._ksp, self._A):
             if obj is not None:
                 obj.destroy()
-        self._ksp = self._A = self._pattern = self._last = self._last_ids = None
+        self._ksp = self._A = self._pattern = None
+
+    def destroy(self) -> None:
+        self._free_operator()
+        self._last = self._last_ids = None
 
 
 def hidden_pressure(hidden: np.ndarray, p: np.ndarray, rho: np.ndarray, gx: np.ndarray,
@@ -473,8 +475,7 @@ class HiddenSurface:
         local = np.zeros((len(functions), n))
         for j, fn in enumerate(functions):
             if found.size:
-                # (eval returns a flat array for a single point)
-                local[j, found] = np.reshape(fn.eval(points[found], cell[first].astype(np.int32)), (found.size, -1))[:, 0]
+                local[j, found] = first_component_at(fn, points[found], cell[first])
         hit = np.zeros(n)
         hit[found] = 1.0
         local = self.comm.allreduce(local, op=MPI.SUM)

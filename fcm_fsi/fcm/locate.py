@@ -17,9 +17,16 @@ from __future__ import annotations
 import numpy as np
 from dolfinx import geometry
 from mpi4py import MPI
+from scipy.spatial import cKDTree
 
 #: a point whose barycentric coordinates in a cell all exceed this lies strictly inside it
 INSIDE = 1e-6
+
+
+def first_component_at(fn, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """The first component of dolfinx Function ``fn`` at ``points`` (n, 3) in their ``cells``
+    (n,), as an (n,) array (``Function.eval`` returns a flat array for a single point)."""
+    return np.reshape(fn.eval(points, np.asarray(cells, np.int32)), (len(cells), -1))[:, 0]
 
 
 class PointLocator:
@@ -30,9 +37,9 @@ class PointLocator:
         self.mesh, self.comm = mesh, mesh.comm
         self.dim = mesh.topology.dim
         self.tree = geometry.BoundingBoxTree(mesh, self.dim)
-        self.n_owned = mesh.topology.index_map(self.dim).size_local
-        x = mesh.geometry.x[:, : self.dim]
         imap = mesh.topology.index_map(self.dim)
+        self.n_owned = imap.size_local
+        x = mesh.geometry.x[:, : self.dim]
         ncells = imap.size_local + imap.num_ghosts
         # the first dim + 1 geometry nodes of a simplex are its vertices
         dofs = mesh.geometry.dofmap.array.reshape(ncells, -1)[: self.n_owned, : self.dim + 1]
@@ -103,7 +110,6 @@ class NearPairs:
     def pairs(self, x: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(i, j, d²) with i < j, of the ``active`` points (n,) of different bodies closer than
         ``radius`` at ``x`` (n, 3)."""
-        from scipy.spatial import cKDTree
         nb = int(self.body.max(initial=-1)) + 1
         if self._x is None:
             moved = np.ones(nb, bool)

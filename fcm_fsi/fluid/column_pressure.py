@@ -27,6 +27,8 @@ import numpy as np
 from dolfinx import geometry
 from mpi4py import MPI
 
+from ..fcm.locate import first_component_at
+
 
 def vertical_frame(gravity: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
     """(up (3,), across (dim − 1, 3)): the unit vector against gravity and orthonormal
@@ -184,8 +186,7 @@ class ColumnPressure:
         local = np.zeros((len(functions) + 1, len(pts)))
         for j, fn in enumerate(functions):
             if point.size:
-                # (eval returns a flat array for a single point)
-                local[j, point] = np.reshape(fn.eval(pts[point], cells), (len(cells), -1))[:, 0]
+                local[j, point] = first_component_at(fn, pts[point], cells)
         local[-1, point] = 1.0
         total = self.comm.allreduce(local, op=MPI.SUM)
         hits = total[-1]
