@@ -64,10 +64,10 @@ def fluid_step_seconds(tm, cut: CutDomain) -> tuple[float, int]:
     """One CN step of a driven flow (u = (1, 0, 0) on the x = 0 face, do-nothing at x = 1)
     on the cut mesh; returns (seconds, Newton iterations) after a warm-up step."""
     cfg = FluidConfig(density=1.0, viscosity=0.01, rtol=1e-6, atol=1e-12, quadrature_degree=cut.degree,
-                      boundaries=(BoundaryCondition(boundary="left", kind="velocity", value=(1.0, 0.0, 0.0)),
-                                  BoundaryCondition(boundary="right", kind="do_nothing"),
+                      boundaries=(BoundaryCondition(boundary="xmin", kind="velocity", value=(1.0, 0.0, 0.0)),
+                                  BoundaryCondition(boundary="xmax", kind="do_nothing"),
                                   *(BoundaryCondition(boundary=b, kind="slip")
-                                    for b in ("bottom", "top", "front", "back"))))
+                                    for b in ("ymin", "ymax", "zmin", "zmax"))))
     ns = NavierStokes(tm.mesh, cfg, 0.02, facet_tags=tm.facet_tags, boundary_names=tm.names, dx=cut.dx,
                       extra_terms=[cut.penalty_term()])
     ns.step()

@@ -77,10 +77,10 @@ def ns_iterations(mesh_n: int, comm, solver: str, reuse: bool = True) -> dict:
     cfg = FluidConfig(density=1.0, viscosity=0.01, rtol=1e-6, atol=1e-12, max_iterations=10,
                       reuse_preconditioner=reuse,
                       petsc=SOLVERS[solver], boundaries=(
-                          BoundaryCondition(boundary="left", kind="parabolic_inflow", max_speed=1.0),
-                          BoundaryCondition(boundary="right", kind="do_nothing"),
+                          BoundaryCondition(boundary="xmin", kind="parabolic_inflow", max_speed=1.0),
+                          BoundaryCondition(boundary="xmax", kind="do_nothing"),
                           *(BoundaryCondition(boundary=b, kind="no_slip")
-                            for b in ("bottom", "top", "front", "back"))))
+                            for b in ("ymin", "ymax", "zmin", "zmax"))))
     ns = NavierStokes(tm.mesh, cfg, 0.05, facet_tags=tm.facet_tags, boundary_names=tm.names)
     ns.set_velocity(lambda x: np.vstack([16 * x[1] * (1 - x[1]) * x[2] * (1 - x[2]),
                                          0 * x[0], 0 * x[0]]))

@@ -11,7 +11,7 @@ from .dem import DEMConfig
 from .fields import param
 from .fluid import FluidConfig
 from .loader import ConfigError, Variant, apply_override, build, read_yaml
-from .mesh import MeshConfig
+from .mesh import MeshConfig, former_name_message
 from .output import OutputConfig
 from .phase_field import PhaseFieldConfig
 from .run import RunConfig
@@ -38,6 +38,8 @@ class Case:
                               "(give at least one)")
         if (self.phase_field is not None or self.fluid is not None) and self.mesh is None:
             raise ConfigError("key 'mesh' is required when phase_field or fluid is given")
+        if self.fluid is not None:
+            self._check_boundary_names()
         pf = self.phase_field
         if pf is not None and self.fluid is None and pf.velocity is None:
             raise ConfigError("key 'phase_field.velocity' is required when there is no fluid section")
@@ -48,6 +50,14 @@ class Case:
         elif self.mesh is not None and self.mesh.structure_band is not None:
             raise ConfigError("key 'mesh.structure_band' grades the mesh around dem blocks: it needs a coupled "
                               "case (both fluid and dem sections)")
+
+    def _check_boundary_names(self) -> None:
+        """Every mesh kind names its boundaries by axis (xmin … zmax): a former name (left …
+        back) is refused with the axis name it now has."""
+        for i, bc in enumerate(self.fluid.boundaries):
+            why = former_name_message(bc.boundary, self.mesh.dim)
+            if why is not None:
+                raise ConfigError(f"key 'fluid.boundaries[{i}].boundary' = {bc.boundary!r}: {why}")
 
     def _check_coupled(self) -> None:
         dim = len(self.mesh.lower)

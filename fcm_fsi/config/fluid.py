@@ -11,14 +11,17 @@ from .petsc import check_petsc_options
 
 @dataclass(frozen=True, kw_only=True)
 class BoundaryCondition:
-    """One boundary condition on the mesh boundary called ``boundary``.
+    """One boundary condition on a plane of the mesh box, named by axis: ``xmin`` is the plane
+    x = mesh.lower[0], ``xmax`` the plane x = mesh.upper[0], then ``ymin``, ``ymax`` and, in 3D,
+    ``zmin``, ``zmax`` (for every mesh kind; with z up, ``zmin`` is the ground and ``zmax`` the
+    lid). The former names ``left right bottom top front back`` (xmin … zmax) are refused with
+    the axis name.
 
-    Boundary names come from the mesh: ``left/right/bottom/top/front/back`` for the
-    rectangle/box meshes, the gmsh physical names (e.g. ``inlet``, ``outlet``, ``walls``,
-    ``cylinder``) for gmsh meshes.
+    The Schäfer–Turek channels of the benchmarks (:mod:`fcm_fsi.mesh.channel`) name their
+    boundaries ``inlet``, ``outlet``, ``walls``, ``cylinder``.
     """
 
-    boundary: str = param(doc="name of the mesh boundary")
+    boundary: str = param(doc="the mesh plane: xmin, xmax, ymin, ymax, and in 3D zmin, zmax")
     kind: Literal["velocity", "parabolic_inflow", "no_slip", "slip", "do_nothing"] = param(
         doc="velocity: u = value; parabolic_inflow: u = max_speed·Π 4s(L−s)/L² along the inward normal "
             "(s across the boundary's bounding box); no_slip: u = 0; slip: u·n = 0 on an axis-aligned "

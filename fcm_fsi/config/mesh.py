@@ -7,6 +7,29 @@ from typing import Literal
 from .fields import param
 from .loader import ConfigError
 
+#: what the planes of the mesh box were called before they were named by axis, in the order of
+#: :func:`box_boundary_names` (x-lo, x-hi, y-lo, y-hi, z-lo, z-hi)
+FORMER_BOX_NAMES = ("left", "right", "bottom", "top", "front", "back")
+
+
+def box_boundary_names(dim: int) -> tuple[str, ...]:
+    """The boundaries of a ``dim``-D mesh, named by axis and end, in the order of their facet
+    tags 1, 2, …: ``xmin xmax ymin ymax`` (2D) and ``zmin zmax`` (3D): the planes
+    x = mesh.lower[0], x = mesh.upper[0], and so on."""
+    return tuple(f"{axis}{end}" for axis in "xyz"[:dim] for end in ("min", "max"))
+
+
+def former_name_message(name: str, dim: int) -> str | None:
+    """Why the former box boundary name ``name`` (``left`` … ``back``) is refused in a
+    ``dim``-D mesh, with its axis name; None for any other name."""
+    if name not in FORMER_BOX_NAMES:
+        return None
+    axis_name = box_boundary_names(3)[FORMER_BOX_NAMES.index(name)]
+    if axis_name not in box_boundary_names(dim):
+        return (f"boundaries are named by axis now; {name!r} was the 3D {axis_name!r}, and a {dim}D mesh has "
+                f"{', '.join(box_boundary_names(dim))}")
+    return f"boundaries are named by axis now; in {dim}D {name!r} is {axis_name!r}"
+
 
 @dataclass(frozen=True, kw_only=True)
 class RefineZone:

@@ -16,6 +16,7 @@ from mpi4py import MPI
 
 from ..config.fluid import BoundaryCondition
 from ..config.loader import ConfigError
+from ..config.mesh import box_boundary_names, former_name_message
 
 
 def _ramp(t: float, ramp: float) -> float:
@@ -141,6 +142,15 @@ def _pin_pressure(ns, point, bcset: BCSet) -> None:
     bcset.pinned_point = np.asarray(target[:gdim], dtype=float)
 
 
+def unknown_boundary(ns, name: str) -> str:
+    """The error for a boundary name the mesh does not have: the names it has and, on a mesh
+    box, the axis name of a former name (``left`` → ``xmin``)."""
+    dim = ns.mesh.geometry.dim
+    why = former_name_message(name, dim) if set(box_boundary_names(dim)) <= set(ns.boundary_names) else None
+    return (f"key 'fluid.boundaries': boundary {name!r} is not a mesh boundary; "
+            f"known: {', '.join(sorted(ns.boundary_names)) or 'none'}" + (f" ({why})" if why else ""))
+
+
 def build_bcs(ns, configs, custom: dict | None = None) -> BCSet:
     """Dirichlet conditions for every configured boundary; pin p when no boundary is natural.
 
@@ -154,8 +164,7 @@ def build_bcs(ns, configs, custom: dict | None = None) -> BCSet:
         velocity_bc(ns, ns.boundary_facets(name), fn, bcset)
     for bc in configs:
         if bc.boundary not in ns.boundary_names:
-            raise ConfigError(f"key 'fluid.boundaries': boundary {bc.boundary!r} is not a mesh boundary; "
-                              f"known: {', '.join(sorted(ns.boundary_names)) or 'none'}")
+            raise ConfigError(unknown_boundary(ns, bc.boundary))
         _one(ns, bc, bcset)
     mesh = ns.mesh
     fdim = mesh.topology.dim - 1

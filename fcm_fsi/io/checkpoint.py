@@ -15,6 +15,7 @@ still be continued from before the event that the newest checkpoint already cont
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 from dataclasses import dataclass
@@ -24,6 +25,7 @@ import numpy as np
 from mpi4py import MPI
 
 from ..config.loader import ConfigError, to_dict
+from ..config.mesh import FORMER_BOX_NAMES, box_boundary_names
 
 # Options added after checkpoints were already being written, with the value that does what
 # the code did before the option existed. A checkpoint hashed without such an option is still
@@ -51,7 +53,19 @@ def _option_holders(data: dict, section: str) -> list[dict]:
     return holders
 
 
-def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str], ...] = ()) -> str:
+def _former_boundary_names(data: dict) -> None:
+    """Put the former names (left … back) back into the resolved case ``data``'s
+    ``fluid.boundaries``, as checkpoints written before the boundaries were named by axis have them."""
+    fluid, mesh = data.get("fluid"), data.get("mesh")
+    if not fluid or not mesh:
+        return
+    former = dict(zip(box_boundary_names(len(mesh["lower"])), FORMER_BOX_NAMES))
+    for bc in fluid["boundaries"]:
+        bc["boundary"] = former.get(bc["boundary"], bc["boundary"])
+
+
+def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str], ...] = (),
+                     former_names: bool = False) -> str:
     """Hash of the resolved case, ignoring what a restart may change: end time, cadence, output,
     and how the linear systems are solved (``fluid.petsc``, ``fluid.reuse_preconditioner``,
     ``fluid.preconditioner_steps``, ``fluid.preconditioner_max_iterations``,
@@ -60,8 +74,11 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
     in the gas when spurious gas jets throttle a run; it changes the solution at the level of the
     time discretisation error, like the CFL-adapted steps themselves). ``legacy``: the hash of the oldest
     checkpoints, which still covered the solver options (such checkpoints are still accepted).
-    ``without``: (section, key) options left out, as in checkpoints written before they existed."""
+    ``without``: (section, key) options left out, as in checkpoints written before they existed.
+    ``former_names``: the boundaries under their names before they were named by axis."""
     data = to_dict(case)
+    if former_names:
+        _former_boundary_names(data)
     for key in ("t_end", "log_every", "output_every", "checkpoint_every"):
         data["run"].pop(key, None)
     if not legacy:
@@ -85,7 +102,8 @@ def accepted_fingerprints(case) -> tuple[str, ...]:
     """Fingerprints a checkpoint of this case may carry: the current one first, then those of
     older code — before the solver options were left out (``legacy``), and before the options
     :data:`ADDED_OPTIONS` [k:] existed, where this case keeps all of those at their
-    old-behaviour values."""
+    old-behaviour values; each also with the boundaries' names from before they were named by
+    axis (the same planes)."""
     data = to_dict(case)
     options = [(sec, key) for sec, key, _ in ADDED_OPTIONS]
     at_old = [all(h.get(key, value) == value for h in _option_holders(data, sec)) for sec, key, value in ADDED_OPTIONS]
@@ -93,8 +111,8 @@ def accepted_fingerprints(case) -> tuple[str, ...]:
     for k in range(len(options), -1, -1):           # k = len: nothing left out (current code)
         if not all(at_old[k:]):
             continue
-        for legacy in (False, True):
-            fp = case_fingerprint(case, legacy, tuple(options[k:]))
+        for former_names, legacy in itertools.product((False, True), repeat=2):
+            fp = case_fingerprint(case, legacy, tuple(options[k:]), former_names)
             if fp not in out:
                 out.append(fp)
     return tuple(out)

@@ -1,7 +1,7 @@
 """Meshes for the Navier–Stokes benchmarks, with named boundaries.
 
-- :func:`rectangle` / :func:`box`: structured dolfinx simplices, boundaries ``left right
-  bottom top (front back)``.
+- :func:`rectangle` / :func:`box`: structured dolfinx simplices, boundaries named by axis,
+  ``xmin xmax ymin ymax (zmin zmax)``.
 - :func:`channel_2d`: Schäfer–Turek 2D channel [0, 2.2] × [0, 0.41] with a cylinder of
   diameter 0.1 at (0.2, 0.2); :func:`channel_3d`: the 3D-1Z channel [0, 2.5] × [0, 0.41]²
   with a z-aligned cylinder at (0.5, 0.2). Boundaries ``inlet outlet walls cylinder``.
@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 from dolfinx import mesh as dmesh
 
+from ..config.mesh import box_boundary_names
+
 CACHE = Path(__file__).resolve().parents[2] / "meshes" / "cache"
 CHANNEL_NAMES = {"inlet": 1, "outlet": 2, "walls": 3, "cylinder": 4}
 
@@ -33,9 +35,10 @@ class TaggedMesh:
     names: dict[str, int]
 
 
-def tag_box_boundaries(msh, lower, upper, names=("left", "right", "bottom", "top", "front", "back")) -> TaggedMesh:
-    """Tag the axis-aligned planes of a rectangle/box mesh: names in order x-lo, x-hi, y-lo, y-hi, z-lo, z-hi."""
-    names = tuple(names)[: 2 * len(lower)]
+def tag_box_boundaries(msh, lower, upper) -> TaggedMesh:
+    """Tag the axis-aligned planes of a rectangle/box mesh, named by axis
+    (:func:`~fcm_fsi.config.mesh.box_boundary_names`): tags 1, 2, … = xmin, xmax, ymin, ymax, zmin, zmax."""
+    names = box_boundary_names(len(lower))
     fdim = msh.topology.dim - 1
     facets, values = [], []
     for tag, (axis, coord) in enumerate(((a, c) for a in range(len(lower)) for c in (lower[a], upper[a])), 1):
@@ -53,18 +56,18 @@ def tag_box_boundaries(msh, lower, upper, names=("left", "right", "bottom", "top
 
 
 def rectangle(comm, lower=(0.0, 0.0), upper=(1.0, 1.0), n=(32, 32), diagonal: str = "right") -> TaggedMesh:
-    """Structured triangles with boundaries left, right, bottom, top."""
+    """Structured triangles with boundaries xmin, xmax, ymin, ymax."""
     diag = {"right": dmesh.DiagonalType.right, "left": dmesh.DiagonalType.left,
             "crossed": dmesh.DiagonalType.crossed}[diagonal]
     msh = dmesh.create_rectangle(comm, [np.array(lower), np.array(upper)], list(n),
                                  dmesh.CellType.triangle, diagonal=diag)
-    return tag_box_boundaries(msh, lower, upper, ("left", "right", "bottom", "top"))
+    return tag_box_boundaries(msh, lower, upper)
 
 
 def box(comm, lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), n=(8, 8, 8)) -> TaggedMesh:
-    """Structured tetrahedra with boundaries left, right, bottom, top, front, back (x, y, z pairs)."""
+    """Structured tetrahedra with boundaries xmin, xmax, ymin, ymax, zmin, zmax."""
     msh = dmesh.create_box(comm, [np.array(lower), np.array(upper)], list(n), dmesh.CellType.tetrahedron)
-    return tag_box_boundaries(msh, lower, upper, ("left", "right", "bottom", "top", "front", "back"))
+    return tag_box_boundaries(msh, lower, upper)
 
 
 def _classify_and_mesh(gmsh, dim: int, length: float, height: float, center, radius: float,

@@ -44,8 +44,8 @@ def max_speed(ns: NavierStokes, gdim: int, comm: MPI.Comm) -> float:
 
 
 class FluidModel:
-    """Incompressible single-phase flow on a rectangle/box whose sides are named
-    left/right/bottom/top(/front/back) in ``fluid.boundaries``."""
+    """Incompressible single-phase flow on a rectangle/box whose sides are named by axis,
+    xmin/xmax/ymin/ymax(/zmin/zmax), in ``fluid.boundaries``."""
 
     series_units = {"u_max": "m/s", "cfl": "-", "divergence_l2": "1/s", "ns_iterations": "-"}
 

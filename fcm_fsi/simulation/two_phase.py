@@ -26,9 +26,9 @@ measured with the smallest cell h_min (the refined surface band), capped by ``ru
 gas nodes (φ < 0.05): the gas's spurious jets along walls hit by the liquid (docs/two-phase.md,
 "Gas Courant number") would otherwise set the step of the whole run.
 
-Diagnostics include the liquid level at the two vertical walls normal to x and the wetted
-length of the bottom (the plane normal to the last axis: ``bottom`` in 2D, ``front`` (z = z_min)
-in 3D, after the mesh's boundary names), each from ∫φ ds over that boundary divided by its extent across the
+Diagnostics include the liquid level at the two vertical walls normal to x (``xmin``,
+``xmax``) and the wetted length of the bottom (the plane normal to the last axis: ``ymin`` in
+2D, ``zmin`` in 3D), each from ∫φ ds over that boundary divided by its extent across the
 measured direction (parallel-safe; exact up to the exponentially small profile tails).
 """
 from __future__ import annotations
@@ -43,6 +43,7 @@ from petsc4py import PETSc
 
 from ..config.case import Case
 from ..config.fluid import FluidConfig
+from ..config.mesh import box_boundary_names
 from ..fluid.hydrostatic import StaticPressure, static_pressure_space
 from ..fluid.navier_stokes import NavierStokes, NonlinearSolveError
 from ..fluid.phase_field import PhaseField
@@ -164,9 +165,10 @@ class TwoPhaseModel:
         def measure(name):
             return comm.allreduce(fem.assemble_scalar(fem.form(one * ds(tagged.names[name]))), op=MPI.SUM)
         vertical = hi[-1] - lo[-1]
-        bottom = "bottom" if self.gdim == 2 else "front"   # the plane normal to the last (vertical) axis
-        self._phi_forms = {"level_left": (fem.form(self.pf.phi * ds(tagged.names["left"])), measure("left") / vertical),
-                           "level_right": (fem.form(self.pf.phi * ds(tagged.names["right"])), measure("right") / vertical),
+        bottom = box_boundary_names(self.gdim)[-2]   # the lower plane of the last (vertical) axis
+        self._phi_forms = {"level_left": (fem.form(self.pf.phi * ds(tagged.names["xmin"])), measure("xmin") / vertical),
+                           "level_right": (fem.form(self.pf.phi * ds(tagged.names["xmax"])),
+                                           measure("xmax") / vertical),
                            "wetted_bottom": (fem.form(self.pf.phi * ds(tagged.names[bottom])),
                                              measure(bottom) / (hi[0] - lo[0]))}
         self._p_bottom = (fem.form(p * ds(tagged.names[bottom])), measure(bottom))

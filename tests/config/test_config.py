@@ -164,7 +164,7 @@ def test_cli_phase_field_without_liquid_names_file_and_key(tmp_path):
             "phase_field": {"initial": {"shape": "box", "lower": [2.0, 2.0], "upper": [3.0, 3.0]}},
             "fluid": {"density": 1000.0, "viscosity": 1e-3, "gas_density": 1.2, "gas_viscosity": 1.8e-5,
                       "gravity": [0.0, -9.81], "pressure_reference": [1.0, 1.0],
-                      "boundaries": [{"boundary": b, "kind": "slip"} for b in ("left", "right", "bottom", "top")]}}
+                      "boundaries": [{"boundary": b, "kind": "slip"} for b in ("xmin", "xmax", "ymin", "ymax")]}}
     f = tmp_path / "dry.yaml"
     f.write_text(yaml.safe_dump(data))
     res = run_cli([str(f), "--output", str(tmp_path / "out")])

@@ -143,8 +143,8 @@ def light_cylinder_case(model: str, factor: float) -> dict:
                     "output_every": 1000, "checkpoint_every": 1000},
             "mesh": {"kind": "rectangle", "lower": [-0.5, 0.0], "upper": [0.5, 1.0], "cells": [80, 80]},
             "fluid": {"density": 1000.0, "viscosity": 1.0e-3, "gravity": [0.0, -9.81],
-                      "boundaries": [{"boundary": b, "kind": "slip"} for b in ("left", "right", "bottom")]
-                      + [{"boundary": "top", "kind": "do_nothing"}]},
+                      "boundaries": [{"boundary": b, "kind": "slip"} for b in ("xmin", "xmax", "ymin")]
+                      + [{"boundary": "ymax", "kind": "do_nothing"}]},
             "dem": {"dt": 1.0e-4, "gravity": [0.0, -9.81, 0.0],
                     "materials": [{"name": "light", "stiffness": 1.0e5, "restitution": 0.5,
                                    "friction_angle": 30.0, "density": 300.0}],

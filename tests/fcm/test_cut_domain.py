@@ -316,7 +316,7 @@ def test_body_forces_split_between_two_bodies():
     rho, mu, dt = 2.0, 0.05, 0.01
     cfg = FluidConfig(density=rho, viscosity=mu, quadrature_degree=cut.degree,
                       boundaries=tuple(BoundaryCondition(boundary=b, kind="no_slip")
-                                       for b in ("left", "right", "bottom", "top")))
+                                       for b in ("xmin", "xmax", "ymin", "ymax")))
     ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names,
                       dx=cut.dx, extra_terms=[cut.penalty_term()])
     u0 = np.array([0.7, -0.3])
@@ -391,10 +391,10 @@ def cavity_with_disc(alpha: float = 1e-3) -> tuple[NavierStokes, CutDomain, Stru
     24×24 mesh, backward Euler, GMRES + block-Jacobi/ILU(0)."""
     tm = rectangle(MPI.COMM_WORLD, (0.0, 0.0), (1.0, 1.0), (SWEEP_N, SWEEP_N))
     cut = CutDomain(tm.mesh, alpha=alpha)
-    walls = tuple(BoundaryCondition(boundary=b, kind="no_slip") for b in ("left", "right", "bottom"))
+    walls = tuple(BoundaryCondition(boundary=b, kind="no_slip") for b in ("xmin", "xmax", "ymin"))
     cfg = FluidConfig(density=1.0, viscosity=0.1, theta=1.0, startup_steps=0, quadrature_degree=cut.degree,
                       rtol=1e-8, atol=1e-12, petsc=dict(ITERATIVE_3D),
-                      boundaries=walls + (BoundaryCondition(boundary="top", kind="velocity", value=(1.0, 0.0)),))
+                      boundaries=walls + (BoundaryCondition(boundary="ymax", kind="velocity", value=(1.0, 0.0)),))
     ns = NavierStokes(tm.mesh, cfg, 0.5, facet_tags=tm.facet_tags, boundary_names=tm.names,
                       dx=cut.dx, extra_terms=[cut.penalty_term()])
     disc = StructureLevelSet(Shapes.cylinder((0, 0, 0), SWEEP_R, 1.0, body=0), 1, 0.2)
@@ -535,7 +535,7 @@ def test_slip_wall_penalises_only_the_normal_velocity():
         cut.update(level, owner, np.zeros((len(level), 2)))
         cfg = FluidConfig(density=rho, viscosity=mu, quadrature_degree=cut.degree,
                           boundaries=tuple(BoundaryCondition(boundary=b, kind="no_slip")
-                                           for b in ("left", "right", "bottom", "top")))
+                                           for b in ("xmin", "xmax", "ymin", "ymax")))
         ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names,
                           dx=cut.dx, extra_terms=[cut.penalty_term()], petsc_options={"ksp_type": "preonly"})
         u0 = np.array([0.7, -0.3])

@@ -252,8 +252,8 @@ def held_water_case(spacings: float) -> dict:
                             "initial": {"shape": "box", "lower": [-1.0, -1.0], "upper": [0.5, 0.4]}},
             "fluid": {"density": 998.2, "viscosity": 1.0e-3, "gas_density": 1.204, "gas_viscosity": 1.82e-5,
                       "gravity": [0.0, -9.81], "tau_freeze": 1.0e-3,
-                      "boundaries": [{"boundary": b, "kind": "slip"} for b in ("left", "right", "bottom")]
-                      + [{"boundary": "top", "kind": "do_nothing"}]},
+                      "boundaries": [{"boundary": b, "kind": "slip"} for b in ("xmin", "xmax", "ymin")]
+                      + [{"boundary": "ymax", "kind": "do_nothing"}]},
             "dem": {"dt": 1.0e-4, "gravity": [0.0, -9.81, 0.0],
                     "materials": [{"name": "concrete", "stiffness": 1.0e7, "restitution": 0.2,
                                    "friction_angle": 30.0, "density": 2400.0}],

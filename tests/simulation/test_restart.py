@@ -235,13 +235,39 @@ def test_checkpoints_of_code_before_an_option_existed_are_accepted_only_at_its_o
     cluster = load_case(path, ["coupling.wall_motion=bonded_cluster"] + old_mass)
     assert case_fingerprint(cluster, without=tuple(keys[1:])) not in accepted_fingerprints(cluster)
     assert case_fingerprint(cluster, without=tuple(keys)) not in accepted_fingerprints(cluster)
-    # only the code from wall_motion on (with and without each of the later options) wrote it
+    # only the code from wall_motion on (with and without each of the later options) wrote it,
+    # with the boundaries named by axis or by their former names
     expected = []
     for k in range(len(keys), 1, -1):
-        expected += [case_fingerprint(cluster, False, tuple(keys[k:])), case_fingerprint(cluster, True, tuple(keys[k:]))]
+        expected += [case_fingerprint(cluster, legacy, tuple(keys[k:]), former_names)
+                     for former_names, legacy in ((False, False), (False, True), (True, False), (True, True))]
     # (an option the case has no section for, such as dem.structure.foundation here, leaves the
     # hash as it is: the same fingerprint once)
     assert accepted_fingerprints(cluster) == tuple(dict.fromkeys(expected))
+
+
+def test_a_checkpoint_from_before_the_boundaries_were_named_by_axis_is_accepted(root):
+    """A checkpoint hashed with the boundaries' former names (left … back, as the code before
+    the axis names loaded the case) is accepted by the converted case; one whose names put the
+    conditions on other planes is not."""
+    import dataclasses
+
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.io.checkpoint import accepted_fingerprints, case_fingerprint
+    case = load_case(root / "cases" / "impact_box_3d.yaml")     # slip sides and ground, open top
+
+    def named(names: dict):
+        """The case with its boundaries renamed (bypassing the check that refuses former names)."""
+        old = dataclasses.replace(case)
+        bcs = tuple(dataclasses.replace(bc, boundary=names[bc.boundary]) for bc in case.fluid.boundaries)
+        object.__setattr__(old, "fluid", dataclasses.replace(case.fluid, boundaries=bcs))
+        return old
+    former = {"xmin": "left", "xmax": "right", "ymin": "bottom", "ymax": "top", "zmin": "front", "zmax": "back"}
+    before = case_fingerprint(named(former))
+    assert before != case_fingerprint(case)
+    assert before == case_fingerprint(case, former_names=True) and before in accepted_fingerprints(case)
+    lid_below = {**former, "zmin": "back", "zmax": "front"}     # the open plane at the ground
+    assert case_fingerprint(named(lid_below)) not in accepted_fingerprints(case)
 
 
 def test_a_checkpoint_from_before_blocks_could_be_bonded_is_accepted_while_none_is(root):

@@ -164,15 +164,15 @@ def test_restart_reproduces_uninterrupted_sloshing(tmp_path):
 
 
 def test_three_d_tank_levels_and_hydrostatic_pressure():
-    """3D (tetrahedra, vertical = z, bottom = the z-min plane `front`): the wall gauges read the
+    """3D (tetrahedra, vertical = z, bottom = the plane zmin): the wall gauges read the
     0.5 m depth and the bottom pressure is hydrostatic within 0.5 % on a 6 × 3 × 12 mesh."""
     data = still_water_case(cells=6, dt=2e-3, t_end=0.006)
     data["mesh"] = {"kind": "box", "lower": [0, 0, 0], "upper": [1, 0.5, 1], "cells": [6, 3, 12]}
     data["phase_field"]["initial"] = {"shape": "box", "lower": [-1, -1, -1], "upper": [2, 2, 0.5]}
     data["fluid"]["gravity"] = [0.0, 0.0, -9.81]
     data["fluid"]["pressure_reference"] = [0.0, 0.0, 1.0]
-    data["fluid"]["boundaries"] = [{"boundary": b, "kind": "no_slip"} for b in ("left", "right", "bottom", "top", "front")] \
-        + [{"boundary": "back", "kind": "slip"}]
+    data["fluid"]["boundaries"] = [{"boundary": b, "kind": "no_slip"} for b in ("xmin", "xmax", "ymin", "ymax", "zmin")]
+    data["fluid"]["boundaries"].append({"boundary": "zmax", "kind": "slip"})
     model = TwoPhaseModel(case_from_dict(data), MPI.COMM_WORLD)
     d = advance(model, 3, 2e-3)
     fl = data["fluid"]

@@ -30,6 +30,7 @@ import numpy as np
 from mpi4py import MPI
 
 from ...config import case_from_dict
+from ...config.mesh import box_boundary_names
 from ...io.logging import get_logger
 from ...io.timing import StageTimer
 from ...simulation.coupled import CoupledModel
@@ -103,11 +104,9 @@ def still_water_case(dim: int, pose: str, cell: float, out: Path) -> dict:
     if dim == 2:
         mesh = {"kind": "rectangle", "lower": [0.0, 0.0], "upper": upper,
                 "cells": [int(round(TANK[0] / cell)), int(round(TANK[2] / cell))]}
-        names = ("left", "right", "bottom", "top")
     else:
         mesh = {"kind": "gmsh_box", "lower": [0.0, 0.0, 0.0], "upper": upper, "size": 0.02,
                 "refine": [{"lower": [0.08, 0.06, 0.0], "upper": [0.22, 0.14, FREE_LIFT + 0.09], "size": cell}]}
-        names = ("left", "right", "bottom", "top", "front", "back")
     up = [0.0, 1.0, 0.0] if dim == 2 else [0.0, 0.0, 1.0]
     bl = blocks(dim, pose)
     data = {
@@ -116,7 +115,8 @@ def still_water_case(dim: int, pose: str, cell: float, out: Path) -> dict:
                 "checkpoint_every": 1000},
         "mesh": mesh,
         "fluid": {"density": RHO, "viscosity": 1.0e-3, "gravity": [-G * u for u in up[:dim]],
-                  "pressure_reference": upper, "boundaries": [{"boundary": b, "kind": "slip"} for b in names]},
+                  "pressure_reference": upper,
+                  "boundaries": [{"boundary": b, "kind": "slip"} for b in box_boundary_names(dim)]},
         "dem": {"dt": 1.0e-5, "gravity": [-G * u for u in up],
                 "materials": [{"name": "stone", "stiffness": 1.0e6, "restitution": 0.2, "friction_angle": 30.0,
                                "density": 2400.0}],

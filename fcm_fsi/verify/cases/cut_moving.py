@@ -82,9 +82,9 @@ def cylinder_run(comm, s: TowSetup, towed: bool, tm=None) -> dict:
     ls = StructureLevelSet(Shapes.cylinder((0.0, 0.0, 0.0), 0.5, 1.0 + 4 * cutoff, body=0), nbodies=1,
                            cutoff=cutoff)
     inflow = 0.0 if towed else 1.0
-    bcs = (BoundaryCondition(boundary="left", kind="velocity", value=(inflow, 0.0)),
-           BoundaryCondition(boundary="bottom", kind="slip"), BoundaryCondition(boundary="top", kind="slip"),
-           BoundaryCondition(boundary="right", kind="do_nothing"))
+    bcs = (BoundaryCondition(boundary="xmin", kind="velocity", value=(inflow, 0.0)),
+           BoundaryCondition(boundary="ymin", kind="slip"), BoundaryCondition(boundary="ymax", kind="slip"),
+           BoundaryCondition(boundary="xmax", kind="do_nothing"))
     cfg = FluidConfig(density=1.0, viscosity=1.0 / s.re, boundaries=bcs, theta=0.5, rtol=1e-8, atol=1e-12,
                       quadrature_degree=cut.degree, stabilization=StabilizationConfig())
     wall_u = np.array([-1.0, 0.0]) if towed else np.zeros(2)
@@ -183,7 +183,7 @@ def submerged_box_run(comm, dim: int, n: int, t_end: float = 1.0, dt: float = 0.
     centre = np.array([[0.5, 0.5, 0.5 if dim == 3 else 0.0]])
     level, owner = ls.evaluate(cut.nodes, centre, IDENTITY)
     stats = cut.update(level, owner, np.zeros((len(level), dim)))
-    walls = ("left", "right", "bottom", "top") + (("front", "back") if dim == 3 else ())
+    walls = tuple(tm.names)          # every side of the box
     gravity = (0.0, -g) if dim == 2 else (0.0, -g, 0.0)
     cfg = FluidConfig(density=rho, viscosity=1e-3, gravity=gravity, rtol=1e-10, atol=1e-10,
                       quadrature_degree=cut.degree, pressure_reference=(0.0, 1.0) if dim == 2 else (0.0, 1.0, 0.0),

@@ -101,7 +101,7 @@ def oscillating_run(comm, s: OscillationSetup, reference: dict) -> dict:
     cutoff = 0.5
     ls = StructureLevelSet(Shapes.cylinder((0.0, 0.0, 0.0), 0.5, 1.0 + 4 * cutoff, body=0), nbodies=1,
                            cutoff=cutoff)
-    walls = ("left", "right", "bottom", "top")
+    walls = tuple(tm.names)          # the four sides
     cfg = FluidConfig(density=1.0, viscosity=1.0 / s.re, theta=0.5, rtol=1e-8, atol=1e-12,
                       quadrature_degree=cut.degree, stabilization=StabilizationConfig(),
                       boundaries=tuple(BoundaryCondition(boundary=b, kind="no_slip") for b in walls))

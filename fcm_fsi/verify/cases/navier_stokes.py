@@ -76,7 +76,7 @@ def _taylor_green_run(comm, n: int, dt: float, t_end: float, nu: float, tm=None,
     cfg = FluidConfig(density=1.0, viscosity=nu, rtol=1e-10, atol=1e-13, nonlinear=nonlinear)
     exact = _tg_exact(nu)
     ns = NavierStokes(tm.mesh, cfg, dt, facet_tags=tm.facet_tags, boundary_names=tm.names,
-                      velocity_functions={b: exact for b in ("left", "right", "bottom", "top")})
+                      velocity_functions={b: exact for b in tm.names})
     ns.set_velocity(lambda x: exact(x, 0.0))
     nsteps = int(round(t_end / dt))
     for _ in range(nsteps):
@@ -142,10 +142,10 @@ def taylor_green(level, out_dir: Path, comm) -> list[Metric]:
 def cavity_solution(comm, re: float, n: int):
     """Steady lid-driven unit cavity (lid speed 1, ν = 1/Re) by backward-Euler pseudo-time marching."""
     tm = channel.rectangle(comm, (0.0, 0.0), (1.0, 1.0), (n, n), diagonal="crossed")
-    bcs = (BoundaryCondition(boundary="top", kind="velocity", value=(1.0, 0.0)),
-           BoundaryCondition(boundary="left", kind="no_slip"),
-           BoundaryCondition(boundary="right", kind="no_slip"),
-           BoundaryCondition(boundary="bottom", kind="no_slip"))
+    bcs = (BoundaryCondition(boundary="ymax", kind="velocity", value=(1.0, 0.0)),
+           BoundaryCondition(boundary="xmin", kind="no_slip"),
+           BoundaryCondition(boundary="xmax", kind="no_slip"),
+           BoundaryCondition(boundary="ymin", kind="no_slip"))
     cfg = FluidConfig(density=1.0, viscosity=1.0 / re, boundaries=bcs, theta=1.0, rtol=1e-9, atol=1e-12,
                       stabilization=StabilizationConfig(time_term=False))
     ns = NavierStokes(tm.mesh, cfg, 1.0, facet_tags=tm.facet_tags, boundary_names=tm.names)

@@ -47,13 +47,13 @@ FAST_STEP = {"run": {"cfl": 1.0, "dt_max": 0.01, "dt_growth": 1.2},
              "phase_field": {"picard_max_iterations": 1}}
 
 
-def slip_walls(names=("left", "right", "bottom", "top"), kind="slip") -> list[dict]:
+def slip_walls(names=("xmin", "xmax", "ymin", "ymax"), kind="slip") -> list[dict]:
     return [{"boundary": n, "kind": kind} for n in names]
 
 
 def thin_slab_3d(data: dict, thickness: float, cells: int = 1) -> dict:
     """The 3D version of a 2D (x, y = vertical) case mapping: a slab of the given thickness [m]
-    between slip walls, vertical = z (the box mesh names the z planes front = bottom, back = top).
+    between slip walls ymin, ymax; vertical = z, so the 2D case's ymin, ymax become zmin, zmax.
     Refine zones, initial boxes and the pressure reference get the thickness as their y range."""
     out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in data.items()}
     out["name"] = data["name"] + "_3d"
@@ -74,9 +74,9 @@ def thin_slab_3d(data: dict, thickness: float, cells: int = 1) -> dict:
     fl["gravity"] = [fl["gravity"][0], 0.0, fl["gravity"][1]]
     ref = fl["pressure_reference"]
     fl["pressure_reference"] = [ref[0], 0.0, ref[1]]
-    rename = {"bottom": "front", "top": "back"}
+    rename = {"ymin": "zmin", "ymax": "zmax"}
     fl["boundaries"] = ([{**bc, "boundary": rename.get(bc["boundary"], bc["boundary"])} for bc in fl["boundaries"]]
-                        + slip_walls(("bottom", "top")))
+                        + slip_walls(("ymin", "ymax")))
     return out
 
 
@@ -122,7 +122,7 @@ def still_water_case(cells: int, dt: float, t_end: float = 1.0) -> dict:
                         **FAST_STEP["phase_field"],
                         "initial": {"shape": "box", "lower": [-1.0, -1.0], "upper": [2.0, STILL_DEPTH]}},
         "fluid": {**WATER_AIR, "gravity": [0.0, -G], "pressure_reference": [0.0, STILL_HEIGHT],
-                  "boundaries": slip_walls(("left", "right", "bottom"), "no_slip") + slip_walls(("top",)),
+                  "boundaries": slip_walls(("xmin", "xmax", "ymin"), "no_slip") + slip_walls(("ymax",)),
                   "nonlinear": FAST_STEP["fluid"]["nonlinear"]},
         "output": {"xdmf": False, "checkpoint": False},
     }
