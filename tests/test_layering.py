@@ -22,7 +22,7 @@ PACKAGE = ROOT / "fcm_fsi"
 
 #: package (first name under fcm_fsi) → layer
 LAYER = {"config": 0, "geometry": 0, "mesh": 1, "fcm": 2, "fluid": 3, "dem": 3, "coupling": 4, "simulation": 5,
-         "verify": 6, "bench": 6, "tools": 6, "cli": 6, "preflight": 6, "__main__": 6, "__init__": 6}
+         "verify": 6, "bench": 6, "tools": 6, "cli": 6, "preflight": 6, "api": 6, "__main__": 6, "__init__": 6}
 TOP = max(LAYER.values())
 #: the utility package and the only packages it may import
 UTILITY, UTILITY_IMPORTS = "io", {"config"}
@@ -130,7 +130,7 @@ def test_checker_finds_upward_imports(importer, imported):
 @pytest.mark.parametrize("importer, imported", [
     ("fcm_fsi.fluid.phase_field", "fcm_fsi.fcm.cut"),
     ("fcm_fsi.fcm.levelset", "fcm_fsi.geometry"),
-    ("fcm_fsi.dem.driver", "fcm_fsi.io.csv"),
+    ("fcm_fsi.dem.output", "fcm_fsi.io.csv"),
     ("fcm_fsi.io.checkpoint", "fcm_fsi.config.loader"),
     ("fcm_fsi.simulation.coupled", "fcm_fsi.dem.walls"),
     ("fcm_fsi.tools.verify", "fcm_fsi.verify.runner"),          # entry points among themselves

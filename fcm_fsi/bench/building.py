@@ -85,8 +85,9 @@ def run(argv: list[str]) -> int:
     p.add_argument("--out", type=Path, default=Path("bench_building"), help="output directory")
     args = p.parse_args(argv)
     setup_logging("INFO", rank=0)
-    from ..dem.contact import Materials, SphereContact, WallContact, damping_ratio
+    from ..dem.contact import Materials, SphereContact, damping_ratio
     from ..dem.system import DEMSystem
+    from ..dem.wall_contact import WallContact
 
     cfg, coh = paper_building()
     full = build_building(cfg)

@@ -45,11 +45,48 @@ class Case:
             raise ConfigError("key 'phase_field.velocity' is required when there is no fluid section")
         if self.run.cfl_gas is not None and (pf is None or self.fluid is None):
             raise ConfigError("key 'run.cfl_gas' applies to two-phase flow: it needs both phase_field and fluid")
+        self._check_output()
         if self.fluid is not None and self.dem is not None:
             self._check_coupled()
         elif self.mesh is not None and self.mesh.structure_band is not None:
             raise ConfigError("key 'mesh.structure_band' grades the mesh around dem blocks: it needs a coupled "
                               "case (both fluid and dem sections)")
+
+    def _check_output(self) -> None:
+        """Probes, gauges and sensors: a mesh to sit in, points of its dimension, fields it has."""
+        out = self.output
+        if not (out.probes or out.gauges or out.sensors):
+            return
+        if self.mesh is None:
+            raise ConfigError("keys 'output.probes', 'output.gauges', 'output.sensors' record fields on the mesh: "
+                              "a DEM-only case has none")
+        dim = len(self.mesh.lower)
+        for i, probe in enumerate(out.probes):
+            if len(probe.point) != dim:
+                raise ConfigError(f"key 'output.probes[{i}].point' = {list(probe.point)} (probe {probe.name!r}): "
+                                  f"give {dim} coordinates for this {dim}D mesh")
+            need = {"p": self.fluid, "u": self.fluid or (self.phase_field and self.phase_field.velocity),
+                    "phi": self.phase_field}
+            for field in probe.fields:
+                if need[field] is None:
+                    section = "phase_field" if field == "phi" else "fluid"
+                    raise ConfigError(f"key 'output.probes[{i}].fields' (probe {probe.name!r}): {field!r} needs a "
+                                      f"'{section}' section")
+        for i, gauge in enumerate(out.gauges):
+            if len(gauge.position) != dim - 1:
+                raise ConfigError(f"key 'output.gauges[{i}].position' = {list(gauge.position)} (gauge "
+                                  f"{gauge.name!r}): give {dim - 1} coordinate(s) (the vertical line's "
+                                  f"{'x' if dim == 2 else 'x, y'}) for this {dim}D mesh")
+            if self.phase_field is None:
+                raise ConfigError(f"key 'output.gauges[{i}]' (gauge {gauge.name!r}): a gauge records the liquid "
+                                  "height ∫φ dz and needs a 'phase_field' section")
+        for i, sensor in enumerate(out.sensors):
+            if self.dem is None or self.fluid is None:
+                raise ConfigError(f"key 'output.sensors[{i}]' (sensor {sensor.name!r}): sensors move with blocks "
+                                  "and need a coupled case (fluid and dem sections)")
+            if len(sensor.point) != dim:
+                raise ConfigError(f"key 'output.sensors[{i}].point' = {list(sensor.point)} (sensor "
+                                  f"{sensor.name!r}): give {dim} coordinates for this {dim}D mesh")
 
     def _check_boundary_names(self) -> None:
         """Every mesh kind names its boundaries by axis (xmin … zmax): a former name (left …
@@ -68,6 +105,17 @@ class Case:
         if dim == 2 and self.coupling.depth is None:
             raise ConfigError("key 'coupling.depth' is required for a 2D fluid with dem blocks: the out-of-plane "
                               "extent (m) that turns the fluid's force per unit depth into a force")
+
+    @classmethod
+    def from_yaml(cls, path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
+        """A case file with ``key.path=value`` overrides, as ``run CASE.yaml --set ...`` reads it
+        (:func:`load_case`)."""
+        return load_case(path, overrides)
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "<dict>") -> Case:
+        """A case from a mapping with the case file's layout (:func:`case_from_dict`)."""
+        return case_from_dict(data, source)
 
     @property
     def physics(self) -> str:

@@ -6,7 +6,7 @@ Per fluid step Δt_f the coupling loop
    block in its body frame, and :meth:`DEMSubcycler.pose` each step for where the bodies
    are, so the fluid side can build the structure level set (step a);
 2. hands the fluid force and torque on every block to :meth:`DEMSubcycler.advance`, which
-   runs Δt_f / Δt_DEM explicit DEM steps (:func:`substep_count`) with that load held or
+   runs the fluid step in whole DEM steps (:meth:`DEMSubcycler.substeps`) with that load held or
    linearly interpolated and records what it delivered (step d);
 3. reads :meth:`DEMSubcycler.rigid_velocity` at the fluid's interface points as the
    moving-wall velocity ū of the penalty term (step e).
@@ -285,25 +285,48 @@ class DEMSubcycler:
 
     def __init__(self, system: DEMSystem):
         self.system = system
+        self.dem_dt = system.dt        # the case's DEM step [s]; a fluid step takes whole steps no longer
         self.last: Exchange | None = None
         # means of v, ω over the last advance's sub-steps (nb, 3): the displacement / Δt_f [m/s],
         # and [rad/s]; None before the first advance (state that a checkpoint must carry)
         self.mean_velocity: np.ndarray | None = None
         self.mean_omega: np.ndarray | None = None
 
+    def substeps(self, fluid_dt: float) -> int:
+        """DEM steps in a fluid step of ``fluid_dt`` [s]: the fewest whole steps no longer than
+        the DEM step that fill it exactly (the last fluid step before t_end may be a fraction
+        of the others)."""
+        return int(np.ceil(fluid_dt / self.dem_dt * (1 - 1e-9)))
+
+    def whole_steps(self, dt: float) -> float:
+        """``dt`` [s] rounded down to a whole number (at least one) of DEM steps."""
+        return max(np.floor(dt / self.dem_dt * (1 + 1e-9)), 1.0) * self.dem_dt if np.isfinite(dt) else dt
+
+    def halves(self, fluid_dt: float) -> bool:
+        """Whether a fluid step of ``fluid_dt`` [s] splits into two of whole DEM steps."""
+        n = fluid_dt / self.dem_dt
+        return n >= 2 - 1e-9 and abs(n / 2 - round(n / 2)) <= 1e-9
+
     def advance(self, fluid_dt: float, force: np.ndarray, torque: np.ndarray,
                 mode: Literal["hold", "linear"] = "hold") -> None:
-        """Run Δt_f / Δt_DEM DEM steps with the fluid ``force`` (nb, 3) [N] and ``torque``
-        (nb, 3) [N m] on every block, and record the :class:`Exchange` in ``self.last``.
+        """Run :meth:`substeps` DEM steps of Δt_f / n with the fluid ``force`` (nb, 3) [N] and
+        ``torque`` (nb, 3) [N m] on every block, and record the :class:`Exchange` in ``self.last``.
 
         ``hold``: the new load acts over the whole interval (impulse F·Δt_f).
         ``linear``: the load ramps from the previous exchange's to the new one, sampled at
         the middle (k + ½)/n of each DEM step, so the impulse is the trapezoid
         Δt_f (F_prev + F)/2 — the impulse of a Crank–Nicolson fluid step."""
-        st, dt = self.system.state, self.system.dt
-        n = substep_count(fluid_dt, dt)
         if mode not in ("hold", "linear"):
             raise ValueError(f"mode = {mode!r}; allowed: 'hold', 'linear'")
+        n = self.substeps(fluid_dt)
+        self.system.dt = fluid_dt / n
+        try:
+            self._advance(n, force, torque, mode)
+        finally:
+            self.system.dt = self.dem_dt
+
+    def _advance(self, n: int, force: np.ndarray, torque: np.ndarray, mode: str) -> None:
+        st, dt = self.system.state, self.system.dt
         F0, T0 = st.ext_force.copy(), st.ext_torque.copy()
         F1, T1 = _per_block(force, st.nb, "force"), _per_block(torque, st.nb, "torque")
         impulse, angular = np.zeros((st.nb, 3)), np.zeros((st.nb, 3))

@@ -6,7 +6,9 @@ Layout of the package (data flow top to bottom):
 - ``bodies.py``      mass properties (box, clump), quaternion constructors
                      (rotations: ``fcm_fsi/geometry.py``)
 - ``neighbours.py``  cell list → Verlet pair list with skin
-- ``contact.py``     sphere–sphere and sphere–wall contact (eqs 18–20)
+- ``contact.py``     the contact law (eqs 18–20) and the sphere–sphere kernels
+- ``wall_contact.py`` sphere–wall contact (planes, triangle meshes) with the same law
+- ``contact_reference.py`` NumPy twins of the contact kernels (tests)
 - ``walls.py``       the case's static walls, read once: for the wall contact and the
                      fluid's gap fill
 - ``laws.py``        the registry of contact laws (which ones the fused step implements)
@@ -15,8 +17,7 @@ Layout of the package (data flow top to bottom):
 - ``ledger.py``      energy ledger
 - ``system.py``      :class:`DEMSystem`: one step = a short list of named stages
 - ``model.py``       :class:`DEMSystem` from a ``DEMConfig`` (time-step check)
-- ``output.py``      VTK PolyData (.vtp + .pvd) and HDF5 checkpoints
-- ``driver.py``      ``run_dem_case`` for pure-DEM cases
+- ``output.py``      VTK PolyData (.vtp + .pvd) of the spheres
 
 The interaction hook (contract for contact, cohesive bonds and anything else that
 produces forces between or on blocks)

@@ -26,8 +26,9 @@ import numba as nb
 import numpy as np
 
 from .bodies import _place_block_spheres
-from .contact import _block_walls, _gather_block
+from .contact import _gather_block
 from .integrate import _drift_block, _kick_block
+from .wall_contact import _block_walls
 
 CHUNKS = 64   # block ranges per step (each thread takes CHUNKS / threads of them)
 

@@ -17,7 +17,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from .contact import SphereContact, WallContact
+from .contact import SphereContact
+from .wall_contact import WallContact
 from .walls import wall_contact
 
 

@@ -1,5 +1,5 @@
 """DEM output: spheres as VTK PolyData (.vtp, binary inline) + a .pvd time collection for
-ParaView, and HDF5 checkpoints (h5py) from which a restart continues bit-identically.
+ParaView (checkpoints: simulation/dem_model.py through the shared io/checkpoint.py).
 
 ParaView: open ``spheres.pvd``, apply the *Glyph* filter (glyph type Sphere, scale array
 ``radius``, scale factor 2 — ParaView's unit sphere glyph has radius 0.5) and colour by
@@ -65,54 +65,3 @@ def read_pvd(path: Path, t_max: float = np.inf) -> list[tuple[float, str]]:
     rows = re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', path.read_text())
     limit = t_max + 1e-12 * max(abs(t_max), 1.0) if np.isfinite(t_max) else np.inf
     return [(float(t), f) for t, f in rows if float(t) <= limit]
-
-
-def write_checkpoint(path: Path, system, extra: dict | None = None) -> None:
-    """Everything a bit-identical restart needs, written atomically (tmp file + rename)."""
-    import h5py
-    path = Path(path)
-    tmp = path.with_suffix(".tmp.h5")
-    st = system.state
-    with h5py.File(tmp, "w") as f:
-        f.attrs["t"] = st.t
-        f.attrs["step"] = st.step
-        f.attrs["dt"] = system.dt
-        g = f.create_group("state")
-        for name, a in st.arrays().items():
-            g.create_dataset(name, data=a)
-        for k, it in enumerate(system.interactions):
-            if hasattr(it, "checkpoint_arrays"):
-                gi = f.create_group(f"interaction_{k}")
-                gi.attrs["name"] = getattr(it, "name", type(it).__name__)
-                for name, a in it.checkpoint_arrays().items():
-                    gi.create_dataset(name, data=a)
-        if system.ledger is not None:
-            f.create_dataset("ledger", data=system.ledger.checkpoint_arrays()["ledger"])
-        if system.controls is not None:
-            f.create_dataset("controls_pos0", data=system.controls.pos0)
-        for name, val in (extra or {}).items():
-            f.attrs[name] = val
-    tmp.replace(path)
-
-
-def read_checkpoint(path: Path, system) -> dict:
-    """Restore a system built from the same case; returns the extra attributes."""
-    import h5py
-    st = system.state
-    with h5py.File(path, "r") as f:
-        if f["state/pos"].shape != st.pos.shape or f["state/sph_pos"].shape != st.sph_pos.shape:
-            raise ValueError(f"{path}: checkpoint has {f['state/pos'].shape[0]} blocks / "
-                             f"{f['state/sph_pos'].shape[0]} spheres, the case {st.nb} / {st.ns}")
-        for name, a in st.arrays().items():
-            a[...] = f["state"][name][...]
-        st.t = float(f.attrs["t"])
-        st.step = int(f.attrs["step"])
-        for k, it in enumerate(system.interactions):
-            if hasattr(it, "restore") and f"interaction_{k}" in f:
-                gi = f[f"interaction_{k}"]
-                it.restore({name: gi[name][...] for name in gi})
-        if system.ledger is not None and "ledger" in f:
-            system.ledger.restore({"ledger": f["ledger"][...]})
-        if system.controls is not None and "controls_pos0" in f:
-            system.controls.pos0[...] = f["controls_pos0"][...]
-        return {k: f.attrs[k] for k in f.attrs}

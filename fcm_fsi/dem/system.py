@@ -21,13 +21,14 @@ import numpy as np
 
 from . import L_DASHPOT, L_FRICTION, L_SPRING, LEDGER_SLOTS
 from .bodies import update_sphere_positions
-from .contact import HIST, SphereContact, WallContact
+from .contact import HIST, SphereContact
 from .control import Controls
 from .fused import advance_blocks
 from .integrate import drift, kick, omega_from_angmom
 from .laws import fused_parts
 from .ledger import Ledger
 from .state import DEMState
+from .wall_contact import WallContact
 
 
 def critical_time_step(m: float, k: float, h: float) -> float:
@@ -177,6 +178,37 @@ class DEMSystem:
 
     def _zero(self) -> np.ndarray:
         return np.zeros_like(self.force)
+
+    # ------------------------------------------------------------------ checkpoint
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Copies of everything the DEM carries from step to step (state, contact histories,
+        bonds, ledger, controls), by flat names: checkpoint globals and step snapshots."""
+        st = self.state
+        out = {f"dem__{name}": a.copy() for name, a in st.arrays().items()}
+        out["dem__time"] = np.array([st.t, float(st.step)])
+        for k, it in enumerate(self.interactions):
+            if hasattr(it, "checkpoint_arrays"):
+                out.update({f"dem_int{k}__{name}": np.copy(a) for name, a in it.checkpoint_arrays().items()})
+        if self.ledger is not None:
+            out["dem__ledger"] = np.copy(self.ledger.checkpoint_arrays()["ledger"])
+        if self.controls is not None:
+            out["dem__controls_pos0"] = np.copy(self.controls.pos0)
+        return out
+
+    def load_arrays(self, g: dict[str, np.ndarray]) -> None:
+        """Inverse of :meth:`arrays`."""
+        st = self.state
+        for name, a in st.arrays().items():
+            a[...] = g[f"dem__{name}"]
+        st.t, st.step = float(g["dem__time"][0]), int(g["dem__time"][1])
+        for k, it in enumerate(self.interactions):
+            if hasattr(it, "restore"):
+                prefix = f"dem_int{k}__"
+                it.restore({n[len(prefix):]: np.copy(a) for n, a in g.items() if n.startswith(prefix)})
+        if self.ledger is not None and "dem__ledger" in g:
+            self.ledger.restore({"ledger": np.copy(g["dem__ledger"])})
+        if self.controls is not None and "dem__controls_pos0" in g:
+            self.controls.pos0[...] = g["dem__controls_pos0"]
 
     # ------------------------------------------------------------------ time step
     def critical_time_step(self) -> float:

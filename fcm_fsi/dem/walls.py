@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config.dem import DEMConfig
-from .contact import Materials, WallContact
+from .contact import Materials
+from .wall_contact import WallContact
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from ..fcm.domain import CutGeometry, CutStatistics
-from .navier_stokes import cell_size, momentum_residual
+from .ns_forms import cell_size, momentum_residual
 from .tagged_form import TaggedForm
 
 #: wall conditions on Γ (module docstring): the paper's penalty; penalty + the pressure part of
@@ -73,12 +73,20 @@ class CutDomain(CutGeometry):
         self.wall_dofs = self.node_map(self.V1)
         self.h = cell_size(mesh)
         self._force_forms = None
+        # the bodies at the mesh vertices as the last update left them: fluid side (level set > 0)
+        # and the wall velocity ū [m/s] (n, gdim); read by the flow inside the bodies (rigid_inside)
+        self.node_fluid = np.ones(self.nodes.shape[0], bool)
+        self.node_wall_velocity = np.zeros((self.nodes.shape[0], self.gdim))
+        self._node_maps = {}            # id(function space) → (space, its node at each vertex)
+        self._density_forms = None      # fluid_part_density: (rho, its forms)
+        self._inside_form = None        # liquid_inside: (phi, its form)
 
     def update(self, level: np.ndarray, owner: np.ndarray, wall_velocity: np.ndarray,
                share: tuple[np.ndarray, np.ndarray] | None = None) -> CutStatistics:
         """New cut (:meth:`CutGeometry.update`: level set, owning body and ``share`` at each
         node) and the wall velocity ū at each node (n, gdim). Returns the cut's statistics."""
         stats = super().update(level, owner, share)
+        self.node_fluid = level > 0
         self.set_wall_velocity(wall_velocity)
         return stats
 
@@ -87,6 +95,57 @@ class CutDomain(CutGeometry):
         bs = self.V1.dofmap.index_map_bs
         for d in range(self.gdim):
             self.wall_velocity.x.array[bs * self.wall_dofs + d] = wall_velocity[:, d]
+        self.node_wall_velocity = wall_velocity
+
+    # ------------------------------------------------ the bodies as the phase field sees them
+    def _vertex_nodes(self, V: fem.FunctionSpace) -> np.ndarray:
+        """:meth:`node_map` of ``V``, computed once per space."""
+        key = id(V)
+        if key not in self._node_maps:
+            self._node_maps[key] = (V, self.node_map(V))     # the space kept so its id stays unique
+        return self._node_maps[key][1]
+
+    def fluid_nodes(self, V: fem.FunctionSpace) -> np.ndarray:
+        """True at the nodes of the P1 vector space ``V`` on the fluid side (level set > 0; this
+        rank incl. ghosts): the fictitious flow inside the bodies limits neither the CFL step
+        nor the reported speed."""
+        nodes = self._vertex_nodes(V)
+        out = np.ones(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, bool)
+        out[nodes] = self.node_fluid
+        return out
+
+    def rigid_inside(self, u_values: np.ndarray, V: fem.FunctionSpace) -> None:
+        """The phase field inside the bodies moves with them: set ``u_values`` (the array of a
+        P1 vector function on ``V``) to ū at the nodes inside (level set ≤ 0), in place."""
+        nodes = self._vertex_nodes(V)
+        u = u_values.reshape(-1, self.gdim)
+        rigid = np.zeros_like(u)
+        rigid[nodes] = self.node_wall_velocity
+        inside = ~self.fluid_nodes(V)
+        u[inside] = rigid[inside]
+
+    def fluid_part_density(self, rho, rho_cell: fem.Function, lo: float, hi: float) -> None:
+        """``rho_cell`` [kg/m³] := the mean of ``rho`` over each cell's weighted fluid part, not
+        its midpoint: a cut cell whose fluid part is air must not take the water carried in its
+        fictitious part, nor the reverse. Clipped to [lo, hi] (the phases' densities): the
+        fitted weights may be negative at some points, and the mean sets the wall penalty p̄
+        and the PSPG scaling, which must stay positive."""
+        if self._density_forms is None or self._density_forms[0] is not rho:
+            v0 = ufl.TestFunction(rho_cell.function_space)
+            self._density_forms = (rho, TaggedForm(rho * v0 * self.dx), TaggedForm(v0 * self.dx))
+        num = fem.petsc.assemble_vector(self._density_forms[1].form)
+        den = fem.petsc.assemble_vector(self._density_forms[2].form)
+        rho_cell.x.array[: len(num.array)] = np.clip(num.array / den.array, lo, hi)
+        rho_cell.x.scatter_forward()
+        num.destroy(), den.destroy()
+
+    def liquid_inside(self, phi: fem.Function) -> float:
+        """|{φ ≥ ½}| inside the bodies [m^d]: the indicator at the cut quadrature points weighted
+        by the solid fraction (collective)."""
+        if self._inside_form is None or self._inside_form[0] is not phi:
+            liquid = ufl.conditional(ufl.ge(phi, 0.5), 1.0, 0.0)
+            self._inside_form = (phi, fem.form(liquid * (1 - self.fluid_fraction) * self.dx_q))
+        return self.comm.allreduce(fem.assemble_scalar(self._inside_form[1]), op=MPI.SUM)
 
     def penalty_coefficient(self, parts, h):
         """p̄ = γ (μ/h + ρ h/Δt) [Pa s/m] (module docstring), with the cell-wise ρ̄, μ̄ of a

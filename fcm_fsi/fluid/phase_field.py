@@ -45,6 +45,11 @@ QUADRATURE_DEGREE = {"conservative": 3, "nonconservative": 4}
 NORMAL_REGULARISATION = 1e-8  # |∇φ| floor relative to 1/ε in n = ∇φ/|∇φ|
 
 
+def property_map(phi: np.ndarray, liquid: float, gas: float) -> np.ndarray:
+    """Eqs 12–13: gas + (liquid − gas)·φ̂ with φ̂ = φ clipped to [0, 1]."""
+    return gas + (liquid - gas) * np.clip(phi, 0.0, 1.0)
+
+
 def mobility(cfg: PhaseFieldConfig, velocity_scale: float, h_min: float) -> float:
     """γ [m/s] = mobility_factor · U, times min(1, h_min/mobility_length) when that length is set.
 
@@ -264,11 +269,8 @@ class PhaseField:
         self.steps_done = 0
         self.volume0 = None
         self.mass0 = None
-        #: on a cut domain: the fluid fraction of every owned cell (weights the interface
-        #: measure) and a collective callable giving the liquid volume inside the bodies [m^d],
-        #: which the corrected volume leaves out (both None: the whole mesh)
-        self.interface_cell_weights = None
-        self.liquid_inside_bodies = None
+        #: the cut domain whose fluid part holds the liquid (use_cut; None: the whole mesh)
+        self.cut = None
 
     # --- state -------------------------------------------------------------------
     def set_initial(self, shape: InitialShape) -> None:
@@ -290,11 +292,20 @@ class PhaseField:
     def volume(self) -> tuple[float, float]:
         """(|{φ ≥ 1/2}|, interface measure) [m^d, m^(d−1)] (collective), of the whole mesh or,
         on a cut domain, of its fluid part: the exact whole-mesh volume minus
-        :attr:`liquid_inside_bodies`, the interface measure of each cell times its fluid fraction."""
-        vol, area = liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm, self.interface_cell_weights)
-        if self.liquid_inside_bodies is None:
+        the liquid inside the bodies, the interface measure of each cell times its fluid fraction."""
+        weights = None if self.cut is None else self.cut.fluid_fractions()
+        vol, area = liquid_volume_and_area(self.geometry, self.phi.x.array, self.comm, weights)
+        if self.cut is None:
             return vol, area
-        return vol - self.liquid_inside_bodies(), area
+        return vol - self.cut.liquid_inside(self.phi), area
+
+    def use_cut(self, cut) -> None:
+        """From now on the liquid lives in the fluid part of ``cut`` (anything with
+        ``fluid_fractions()`` of the owned cells and ``liquid_inside(phi)`` [m^d], collective):
+        :meth:`volume` and the volume correction count only it, and the reference volume is
+        the fluid part's now."""
+        self.cut = cut
+        self.volume0 = self.volume()[0]
 
     # --- one step ----------------------------------------------------------------
     def advance(self, dt: float) -> int:

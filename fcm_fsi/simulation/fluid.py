@@ -37,6 +37,20 @@ def ns_load_state(ns: NavierStokes, checkpoint) -> None:
     ns.u_nm1.x.array[:] = nodal_values_at(xv, checkpoint.fields["u_nm1"], "u_nm1").ravel()
 
 
+def ns_snapshot(ns: NavierStokes) -> tuple:
+    """Local copies (ghosts included) of what a step changes in ``ns``: U, Uⁿ, uⁿ⁻¹, t, the step
+    count and the length of the solve history (:func:`ns_restore`)."""
+    return (ns.U.x.array.copy(), ns.U_n.x.array.copy(), ns.u_nm1.x.array.copy(), ns.t, ns.step_count,
+            len(ns.history))
+
+
+def ns_restore(ns: NavierStokes, snap: tuple) -> None:
+    """Inverse of :func:`ns_snapshot`."""
+    U, U_n, u_nm1, ns.t, ns.step_count, nhist = snap
+    ns.U.x.array[:], ns.U_n.x.array[:], ns.u_nm1.x.array[:] = U, U_n, u_nm1
+    del ns.history[nhist:]
+
+
 def max_speed(ns: NavierStokes, gdim: int, comm: MPI.Comm) -> float:
     """max |u| over the mesh [m/s] (collective)."""
     u = ns.U.x.array[ns.V_map].reshape(-1, gdim)
@@ -87,6 +101,22 @@ class FluidModel:
 
     def health(self, diag: dict[str, float]) -> str | None:
         return finite_or_message(diag)
+
+    def halves(self, dt: float) -> bool:
+        """Any step may be retaken as two half steps (the loop's retaken steps)."""
+        return True
+
+    def probe_fields(self) -> dict:
+        """The fields probes record (simulation/probes.py)."""
+        return {"p": self.p_out, "u": self.u_out}
+
+    def snapshot(self) -> tuple:
+        """What a step changes, to take it again (:meth:`restore`)."""
+        return ns_snapshot(self.ns), self.last_dt
+
+    def restore(self, snap: tuple) -> None:
+        ns, self.last_dt = snap
+        ns_restore(self.ns, ns)
 
     def state(self):
         return ns_state(self.ns, self.gdim), {"fluid_scalars": np.array([self.ns.t, float(self.ns.step_count)])}

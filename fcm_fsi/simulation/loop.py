@@ -1,8 +1,11 @@
-"""The time loop shared by every mesh-based model: step, report, write, checkpoint.
+"""The time loop shared by every model: step, report, write, checkpoint.
 
-A model provides ``mesh``, ``output_functions``, ``series_units``, ``advance(t, dt)``,
-``diagnostics()``, ``stable_dt()``, ``health()``, ``state()`` and ``load_state()``.
-The loop owns dt control, logging (rank 0), the CSV series, XDMF output, checkpoints,
+Every kind of case runs here (phase field, fluid, two-phase, coupled, DEM only). A model
+provides ``mesh`` (None: no XDMF, the model writes its own output), ``output_functions``,
+``series_units``, ``advance(t, dt)``, ``diagnostics()``, ``stable_dt()``, ``health()``,
+``state()`` and ``load_state()``, and may provide ``write_output(t)``, ``close()`` and, to have
+a failed step retaken as two half steps, ``snapshot()``, ``restore(s)`` and ``halves(dt)``.
+The loop owns dt control and the retaken steps, logging (rank 0), the CSV series, XDMF output, checkpoints,
 the stop on divergence (the last good checkpoint stays untouched), the stop on request and
 the timing table.
 
@@ -87,6 +90,31 @@ class Model(Protocol):
     def load_state(self, checkpoint) -> None: ...
 
 
+#: failures of a step that stop the run unless the step can be retaken
+STEP_FAILURES = (SimulationDiverged, LinearSolveError, NonlinearSolveError, FloatingPointError)
+#: a failed step is retaken as two half steps, at most this many halvings deep
+RETRIES = 2
+
+
+def take_step(model: Model, t: float, dt: float, timer: StageTimer, retries: int = RETRIES) -> int:
+    """Advance ``model`` from ``t`` by ``dt`` [s]. When the step fails and the model can take it
+    again (``snapshot()``, ``restore(s)`` and ``halves(dt)``: the half steps are steps it can
+    take), the start state is restored and the step retaken as two half steps, at most
+    ``retries`` halvings deep; then the failure stops the run. Returns the steps retaken."""
+    can_retake = retries > 0 and hasattr(model, "snapshot") and model.halves(dt)
+    start = model.snapshot() if can_retake else None
+    try:
+        model.advance(t, dt, timer)
+        return 0
+    except STEP_FAILURES as err:
+        if start is None:
+            raise
+        log.warning("t = %.6g s: %s — retrying as two steps of %.4g s", t, str(err).split(";")[0], dt / 2)
+        model.restore(start)
+        return (1 + take_step(model, t, dt / 2, timer, retries - 1)
+                + take_step(model, t + dt / 2, dt / 2, timer, retries - 1))
+
+
 def next_dt(case: Case, model: Model, t: float, last_dt: float | None = None) -> float:
     """Δt for the next step: fixed, or CFL-limited up to dt_max and, with ``run.dt_growth``, to
     that factor times the last step ``last_dt``; never past t_end."""
@@ -116,10 +144,13 @@ class TimeLoop:
     """Runs ``model`` for ``case`` writing into ``out_dir``."""
 
     def __init__(self, case: Case, model: Model, out_dir: Path, comm: MPI.Comm, restart: str | None,
-                 shared_stop: Path | None = None):
+                 shared_stop: Path | None = None, on_step=None):
         """``shared_stop``: a further STOP file that stops this run and is left in place (the
-        verification runner's case folder: it stops every run of a set)."""
+        verification runner's case folder: it stops every run of a set). ``on_step(step, t,
+        row)``: called on every rank after each step (and at the start) with the series row."""
         self.case, self.model, self.out, self.comm = case, model, Path(out_dir), comm
+        self.on_step = on_step
+        self.rows: list[dict[str, float]] = []      # the series rows of this process (api.run returns them)
         self.shared_stop = shared_stop
         self.fingerprint = case_fingerprint(case)
         self.timer = StageTimer()
@@ -130,12 +161,21 @@ class TimeLoop:
             model.load_state(ck)
             self.step, self.t, self.last_dt = ck.step, ck.time, ck.dt
             log.info("restarted from %s at step %d, t = %.6g s", restart, ck.step, ck.time)
-        self.series = TimeSeriesCSV(self.out / "series.csv", {"step": "-", "t": "s", "dt": "s", **model.series_units},
+        self.retried = 0                  # steps retaken as two half steps (take_step)
+        self.series = TimeSeriesCSV(self.out / "series.csv", {"step": "-", "t": "s", "dt": "s", "retried_steps": "-",
+                                                              **model.series_units},
                                     comm.rank, append=bool(restart), resume_at=self.t if restart else None)
+        self.probes = None                # output.probes, gauges, sensors (probes.csv, gauges.csv)
+        out = case.output
+        if out.probes or out.gauges or out.sensors:
+            from .probes import ProbeRecorder
+            self.probes = ProbeRecorder(case, model, self.out, comm.rank, resume_at=self.t if restart else None)
         self.fields, self._fields_t = None, None
-        if case.output.xdmf:
+        if case.output.xdmf and model.mesh is not None:
             name = "fields.xdmf" if not restart else f"fields_from_step{self.step}.xdmf"
             self.fields = FieldWriter(self.out / name, model.mesh, model.output_functions)
+        # a model without a mesh (DEM only) writes its own output (write_output) at the output steps
+        self.writes_fields = self.fields is not None or model.mesh is None
 
     def checkpoint(self, dt: float) -> None:
         if self.case.output.checkpoint:
@@ -150,14 +190,32 @@ class TimeLoop:
         if self.t == self._fields_t:        # already written at this time (an output step that then stopped)
             return
         self._fields_t = self.t
-        self.fields.write(self.t)
+        if self.fields is not None:
+            self.fields.write(self.t)
         extra = getattr(self.model, "write_output", None)
         if extra is not None:
             extra(self.t)
 
+    def close(self) -> None:
+        """Close the field output, the series and the model's own files."""
+        if self.fields is not None:
+            self.fields.close()
+        self.series.close()
+        if self.probes is not None:
+            self.probes.close()
+        close = getattr(self.model, "close", None)
+        if close is not None:
+            close()
+
     def record(self, dt: float, diag: dict[str, float]) -> None:
         with self.timer("output"):
-            self.series.write(step=self.step, t=self.t, dt=dt, **diag)
+            row = {"step": self.step, "t": self.t, "dt": dt, "retried_steps": float(self.retried), **diag}
+            self.series.write(**row)
+            self.rows.append(row)
+            if self.probes is not None:
+                self.probes.record(self.t)
+        if self.on_step is not None:
+            self.on_step(self.step, self.t, row)
 
     def stop_requested(self) -> str | None:
         """Why the run should stop now (a STOP file in the output folder, a signal to any rank),
@@ -181,10 +239,10 @@ class TimeLoop:
     def _stop_on_request(self, why: str, dt: float) -> None:
         """Checkpoint at this step, write the fields, remove the STOP file and raise StopRequested."""
         self.checkpoint(dt)
-        if self.fields:
+        if self.writes_fields:
             with self.timer("output"):
                 self.write_fields()
-        self.series.close()
+        self.close()
         _signalled.clear()
         if self.comm.rank == 0:
             (self.out / STOP_FILE).unlink(missing_ok=True)
@@ -213,14 +271,14 @@ class TimeLoop:
         diag = self.model.diagnostics()
         if self.step == 0:
             self.record(0.0, diag)
-            if self.fields:
+            if self.writes_fields:
                 self.write_fields()
         dt = run.dt
         while self.t < run.t_end * (1 - 1e-12):
             dt = next_dt(self.case, self.model, self.t, self.last_dt)
             try:
-                self.model.advance(self.t, dt, self.timer)
-            except (SimulationDiverged, LinearSolveError, NonlinearSolveError, FloatingPointError) as err:
+                self.retried += take_step(self.model, self.t, dt, self.timer)
+            except STEP_FAILURES as err:
                 self._log_cost_at_stop()
                 raise SimulationDiverged(f"step {self.step + 1}, t = {self.t:.6g} s → {self.t + dt:.6g} s: "
                                          f"{err}; "
@@ -237,7 +295,7 @@ class TimeLoop:
                                          f"last good checkpoint: {self.out / 'checkpoint.h5'}")
             self.record(dt, diag)
             done = self.t >= run.t_end * (1 - 1e-12)
-            if self.fields and (done or (run.output_every and self.step % run.output_every == 0)):
+            if self.writes_fields and (done or (run.output_every and self.step % run.output_every == 0)):
                 with self.timer("output"):
                     self.write_fields()
             if done or self.step % run.checkpoint_every == 0:
@@ -249,9 +307,7 @@ class TimeLoop:
                 why = self.stop_requested()
                 if why:
                     self._stop_on_request(why, dt)
-        if self.fields:
-            self.fields.close()
-        self.series.close()
+        self.close()
         memory = peak_memory_line(self.comm)
         log.info("finished %s: %d steps to t = %.6g s\n%s\n%s", self.case.name, self.step, self.t,
                  self.timer.table(), memory)

@@ -63,6 +63,10 @@ class PhaseFieldModel:
     def health(self, diag: dict[str, float]) -> str | None:
         return phase_field_health(diag)
 
+    def probe_fields(self) -> dict:
+        """The fields probes record (simulation/probes.py): φ and the prescribed velocity."""
+        return {"phi": self.pf.phi, "u": self.velocity}
+
     def state(self):
         return self.pf.state()
 

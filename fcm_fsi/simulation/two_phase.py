@@ -46,20 +46,15 @@ from ..config.fluid import FluidConfig
 from ..config.mesh import box_boundary_names
 from ..fluid.hydrostatic import StaticPressure, static_pressure_space
 from ..fluid.navier_stokes import NavierStokes, NonlinearSolveError
-from ..fluid.phase_field import PhaseField
+from ..fluid.phase_field import PhaseField, property_map
 from ..io.timing import StageTimer
 from ..mesh.build import build_mesh, min_cell_size
 from ..mesh.channel import tag_box_boundaries
-from .fluid import ns_load_state, ns_state
+from .fluid import ns_load_state, ns_restore, ns_snapshot, ns_state
 from .loop import SimulationDiverged
 from .phase_field import phase_field_health
 
 GAS_PHI = 0.05   # velocity nodes with φ below this are gas for run.cfl_gas (the interface's outer tail, ≈ 3ε out)
-
-
-def property_map(phi: np.ndarray, liquid: float, gas: float) -> np.ndarray:
-    """Eqs 12–13: gas + (liquid − gas)·φ̂ with φ̂ = φ clipped to [0, 1]."""
-    return gas + (liquid - gas) * np.clip(phi, 0.0, 1.0)
 
 
 def mass_defect_term(rho_rate: fem.Function):
@@ -138,12 +133,12 @@ class TwoPhaseModel:
             self.static = StaticPressure(self.ns, ns_options["static_pressure"], self.rho, np.array(gravity))
         self.u_adv = fem.Function(self.ns.V, name="u_advect")   # velocity seen by φ
         self._v_to_phi = None   # φ dof at each velocity node (phi_at_velocity_nodes, built on first use)
-        self.advection_filter = None   # optional fn(u_adv array) editing it in place (coupled runs)
+        self.cut = None         # the cut domain the flow lives on in a coupled run (follow_cut)
         self.h_interface = interface_cell_size(case, self.h_min)
         self.pf = PhaseField(self.mesh, case.phase_field, self.h_interface, self.u_adv,
                              gamma_velocity_scale(case), case.run.dt)
         self.pf.set_initial(case.phase_field.initial)
-        self.cell_density = None   # optional fn(rho, rho_cell) setting the cell means (coupled runs)
+        self._advective_dofs = None   # DG0 dof of each cell of pf.advective_cells (follow_cut)
         self.update_properties(self.pf.phi.x.array)
         self.u_out = fem.Function(self.ns.V, name="u")
         self.p_out = fem.Function(self.ns.Q, name="p")
@@ -151,6 +146,7 @@ class TwoPhaseModel:
         self.last_dt = case.run.dt
         self.ns_iterations = self.pf_iterations = 0
         self._boundary_forms(tagged)
+        self.set_output()              # the initial output: the static pressure where there is one
 
     # ------------------------------------------------------------------ set-up
     def _boundary_forms(self, tagged) -> None:
@@ -181,8 +177,8 @@ class TwoPhaseModel:
         fl = self.case.fluid
         self.rho.x.array[:] = property_map(phi_values, fl.density, fl.gas_density)
         self.mu.x.array[:] = property_map(phi_values, fl.viscosity, fl.gas_viscosity)
-        if self.cell_density is not None:
-            self.cell_density(self.rho, self.rho_cell)
+        if self.cut is not None:
+            self.cut.fluid_part_density(self.rho, self.rho_cell, *sorted((fl.density, fl.gas_density)))
         else:
             self.rho_cell.interpolate(self.rho)   # cell mean of the P1 ρ (midpoint value)
         # μ and ρ are both affine in the clipped φ, so the cell's μ follows from its ρ̄
@@ -190,6 +186,21 @@ class TwoPhaseModel:
         self.mu_cell.x.array[:] = property_map(share, fl.viscosity, fl.gas_viscosity)
         if self.static is not None:
             self.static.update()
+
+    def follow_cut(self, cut, extra_cells: np.ndarray | None = None) -> None:
+        """The flow lives on the fluid part of ``cut`` (a ``fluid.cut_walls.CutDomain``; a coupled
+        run calls this after every new cut): φ is transported in advective form on the cells at
+        and inside the bodies (and ``extra_cells``, e.g. sealed pockets); φ inside the bodies
+        moves with them; the cell density ρ̄ is the mean over each cell's fluid part; the
+        phase field's volume is the fluid part's, held at its value at the first call."""
+        if self._advective_dofs is None:
+            dofmap = self.pf.advective_cells.function_space.dofmap
+            self._advective_dofs = dofmap.list.array.reshape(len(cut.geom_cells), -1)[:, 0]
+        cells = cut.body_cells if extra_cells is None else cut.body_cells | extra_cells
+        self.pf.advective_cells.x.array[self._advective_dofs] = cells
+        if self.cut is None:
+            self.cut = cut
+            self.pf.use_cut(cut)
 
     # -------------------------------------------------------------- time step
     def advance(self, t: float, dt: float, timer: StageTimer) -> None:
@@ -199,8 +210,8 @@ class TwoPhaseModel:
             first = ns.step_count == 0
             u_n = ns.U.x.array[vm]
             self.u_adv.x.array[:] = u_n if first else 1.5 * u_n - 0.5 * ns.U_n.x.array[vm]
-            if self.advection_filter is not None:
-                self.advection_filter(self.u_adv.x.array)
+            if self.cut is not None:
+                self.cut.rigid_inside(self.u_adv.x.array, self.ns.V)
             phi_old = pf.phi.x.array.copy()
             self.pf_iterations = pf.advance(dt)
             if self.rho_rate is not None:
@@ -279,6 +290,29 @@ class TwoPhaseModel:
         return phase_field_health(diag)
 
     # ------------------------------------------------------------- checkpoint
+    def probe_fields(self) -> dict:
+        """The fields probes record (simulation/probes.py): total pressure, velocity, φ."""
+        return {"p": self.p_out, "u": self.u_out, "phi": self.pf.phi}
+
+    def halves(self, dt: float) -> bool:
+        """Any step may be retaken as two half steps (the loop's retaken steps)."""
+        return True
+
+    def snapshot(self) -> tuple:
+        """What a step changes (flow, φ with its history and outflow), to take it again."""
+        pf = self.pf
+        return (ns_snapshot(self.ns), self.last_dt, (pf.phi.x.array.copy(), pf.phi_n.x.array.copy(),
+                                                     pf.phi_nm1.x.array.copy(), pf.steps_done, pf.outflow_total))
+
+    def restore(self, snap: tuple) -> None:
+        """Inverse of :meth:`snapshot` (ρ, μ from the restored φ)."""
+        ns, self.last_dt, (phi, phi_n, phi_nm1, steps, outflow) = snap
+        ns_restore(self.ns, ns)
+        pf = self.pf
+        pf.steps_done, pf.outflow_total = steps, outflow
+        pf.phi.x.array[:], pf.phi_n.x.array[:], pf.phi_nm1.x.array[:] = phi, phi_n, phi_nm1
+        self.update_properties(phi)
+
     def state(self):
         fields, globals_ = self.pf.state()
         fields.update(ns_state(self.ns, self.gdim))

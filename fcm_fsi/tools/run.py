@@ -60,31 +60,10 @@ def reference_blas_loaded(maps: str | None = None) -> bool:
 
 
 def run_case(case, out: Path, comm, restart: str | None, case_dir: Path) -> None:
-    """Dispatch on the physics present in the case."""
-    physics = case.physics
-    if physics == "phase_field":
-        from ..simulation.loop import TimeLoop
-        from ..simulation.phase_field import PhaseFieldModel
-        TimeLoop(case, PhaseFieldModel(case, comm, case_dir), out, comm, restart).run()
-    elif physics == "fluid" and case.phase_field is not None:
-        from ..simulation.loop import TimeLoop
-        from ..simulation.two_phase import TwoPhaseModel
-        TimeLoop(case, TwoPhaseModel(case, comm, case_dir), out, comm, restart).run()
-    elif physics == "fluid":
-        from ..simulation.fluid import FluidModel
-        from ..simulation.loop import TimeLoop
-        TimeLoop(case, FluidModel(case, comm, case_dir), out, comm, restart).run()
-    elif physics == "coupled":
-        from ..simulation.coupled import CoupledModel
-        from ..simulation.loop import TimeLoop
-        TimeLoop(case, CoupledModel(case, comm, case_dir, out_dir=out), out, comm, restart).run()
-    elif physics == "dem":
-        from ..dem.driver import run_dem_case
-        run_dem_case(case, out, comm, restart)
-    else:
-        from ..config import ConfigError
-        raise ConfigError(f"{case.name}: cases with a '{physics}' driver are not available in this "
-                          "version (see README: status)")
+    """Run the case on the shared time loop (fcm_fsi/api.py)."""
+    from ..api import build_model
+    from ..simulation.loop import TimeLoop
+    TimeLoop(case, build_model(case, comm, out, restart, case_dir), out, comm, restart).run()
 
 
 def run(args: argparse.Namespace) -> int:

@@ -398,18 +398,18 @@ def test_coupled_wall_motion_uses_the_intact_bonds_clusters():
 
 
 def test_a_coupled_run_whose_kinetic_energy_exceeds_what_the_system_has_stops():
-    """``CoupledModel.health``: kinetic energy of fluid and blocks above the bound (start +
+    """``CoupledDiagnostics.health``: kinetic energy of fluid and blocks above the bound (start +
     g × mass × height; no inflow) is a divergence with a message; below it, or without a bound
     (inflow boundaries), the fluid's own verdict stands. The bonded wall with added_mass 2 ×
     the potential estimate ran on for 0.07 s at 100–250 m/s with φ in range before this
     check (docs/design-notes.md)."""
     from types import SimpleNamespace
 
-    from fcm_fsi.simulation.coupled import CoupledModel
+    from fcm_fsi.coupling.diagnostics import CoupledDiagnostics
     fake = SimpleNamespace(fluid=SimpleNamespace(health=lambda diag: None), _energy_limit=100.0, gdim=2,
-                           _block_kinetic_energy=lambda: 10.0)
-    assert CoupledModel.health(fake, {"kinetic_energy": 80.0}) is None
-    message = CoupledModel.health(fake, {"kinetic_energy": 95.0})
+                           block_kinetic_energy=lambda: 10.0)
+    assert CoupledDiagnostics.health(fake, {"kinetic_energy": 80.0}) is None
+    message = CoupledDiagnostics.health(fake, {"kinetic_energy": 95.0})
     assert "exceeds all the energy" in message and "105 J/m" in message
     fake.fluid = SimpleNamespace(health=lambda diag: "φ left [-0.5, 1.5]")
-    assert CoupledModel.health(fake, {"kinetic_energy": 95.0}) == "φ left [-0.5, 1.5]"
+    assert CoupledDiagnostics.health(fake, {"kinetic_energy": 95.0}) == "φ left [-0.5, 1.5]"

@@ -3,9 +3,10 @@ the stage-by-stage step (compute_forces, kick, drift, update_sphere_positions): 
 import numpy as np
 import pytest
 
-from fcm_fsi.dem.contact import SphereContact, WallContact
+from fcm_fsi.dem.contact import SphereContact
 from fcm_fsi.dem.laws import LAWS, ContactLaw, register
 from fcm_fsi.dem.model import build_system
+from fcm_fsi.dem.wall_contact import WallContact
 from fcm_fsi.verify.cases.dem import _cfg, repose_config
 
 FUSED_LAWS = [name for name, law in LAWS.items() if law.fused]

@@ -3,20 +3,12 @@ import numpy as np
 import pytest
 
 from fcm_fsi.dem.bodies import box_template, clump_template, update_sphere_positions
-from fcm_fsi.dem.contact import (
-    HIST,
-    closest_point_triangle,
-    gather_pair_forces,
-    history_held,
-    material_table,
-    pair_forces,
-    pair_forces_ref,
-    wall_forces,
-    wall_forces_ref,
-)
+from fcm_fsi.dem.contact import HIST, gather_pair_forces, history_held, material_table, pair_forces
+from fcm_fsi.dem.contact_reference import pair_forces_ref, wall_forces_ref
 from fcm_fsi.dem.integrate import drift, drift_ref, kick
 from fcm_fsi.dem.neighbours import build_pairs, build_pairs_ref, carry_history, sphere_pair_map
 from fcm_fsi.dem.state import DEMState
+from fcm_fsi.dem.wall_contact import closest_point_triangle, wall_forces
 
 
 def random_state(nb=40, per=3, seed=1, box=0.08):

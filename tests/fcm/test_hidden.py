@@ -14,11 +14,10 @@ from fcm_fsi.fcm.hidden import (
     chain_conductance,
     hidden_pressure,
     interpolate_hidden,
-    perimeter_samples,
     radius_conductance,
-    surface_samples,
 )
 from fcm_fsi.fcm.levelset import BOX, CYLINDER, SPHERE, Shapes
+from fcm_fsi.fcm.surface_samples import perimeter_samples, surface_samples
 from tests.simulation.test_coupled import series_on_one_and_two_ranks, sliding_pocket_case
 
 RHO, G = 998.2, 9.81
@@ -207,7 +206,7 @@ def fluid_load_at_rest(data: dict) -> tuple[np.ndarray, object]:
     for _ in range(4):
         model.advance(t, 1e-3, timer)
         t += 1e-3
-    return model.force[0, :2].copy(), model
+    return model.exchange.force[0, :2].copy(), model
 
 
 @pytest.mark.parametrize("mode", ["linear", "hydrostatic"])
@@ -223,13 +222,13 @@ def test_a_block_lying_on_the_floor_in_still_water_gets_archimedes_lift(mode):
     force, model = fluid_load_at_rest(data)
     assert abs(force[1] - weight) < 0.01 * weight
     assert abs(force[0]) < 0.01 * weight
-    last = model.hidden.last                         # the underside: hidden, at the floor's 1,450 Pa
+    last = model.cuts.hidden.last                         # the underside: hidden, at the floor's 1,450 Pa
     under = last["hidden"] & (last["n"][:, 1] < -0.99)
     assert under.sum() > 100
     assert 1400.0 < last["p_hidden"][under].mean() < 1500.0
-    assert model.exchange_error < 1e-10              # the fluid's own load still balances
+    assert model.exchange.error < 1e-10              # the fluid's own load still balances
     # one point alone (a rank may find a single probe: dolfinx's eval then returns a flat array)
-    h = model.hidden
+    h = model.cuts.hidden
     one, _ = h.surface._values((model.fluid.p_out,), last["x"][:1], np.zeros(1, int), last["body"][:1], h.cut_owner,
                                h.solid_cell, h.filled_cell)
     assert one.shape == (1, 1) and np.isfinite(one).all()

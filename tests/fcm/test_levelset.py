@@ -8,7 +8,8 @@ import pytest
 from fcm_fsi.coupling.dem_side import rigid_body_velocity
 from fcm_fsi.dem.bodies import axis_angle_quat
 from fcm_fsi.dem.state import DEMState
-from fcm_fsi.fcm.levelset import NO_SHAPE, WALL, Shapes, StructureLevelSet, signed_distance_reference
+from fcm_fsi.fcm.levelset import NO_SHAPE, WALL, Shapes, StructureLevelSet
+from fcm_fsi.fcm.levelset_reference import signed_distance_reference
 from fcm_fsi.geometry import quat_to_matrix_np
 
 

@@ -15,7 +15,8 @@ from mpi4py import MPI
 from fcm_fsi.config.case import case_from_dict, load_case
 from fcm_fsi.config.loader import ConfigError, build
 from fcm_fsi.config.mesh import MeshConfig
-from fcm_fsi.fcm.levelset import FaceDistance, Shapes, signed_distance_reference
+from fcm_fsi.fcm.levelset import FaceDistance, Shapes
+from fcm_fsi.fcm.levelset_reference import signed_distance_reference
 from fcm_fsi.geometry import quat_to_matrix_np
 from fcm_fsi.mesh.build import build_mesh, cell_size_function, cell_sizes
 from tests.conftest import ROOT, mpi_env, run_cli

@@ -87,8 +87,8 @@ def test_single_phase_fluid_case_runs_and_restarts(tmp_path, root):
     assert resumed.returncode == 0, resumed.stderr
     a = np.genfromtxt(tmp_path / "full" / "series.csv", delimiter=",", skip_header=1)
     b = np.genfromtxt(tmp_path / "half" / "series.csv", delimiter=",", skip_header=1)
-    assert a.shape == b.shape == (3, 7)
-    np.testing.assert_allclose(a[-1, :6], b[-1, :6], rtol=1e-10)
+    assert a.shape == b.shape == (3, 8)
+    np.testing.assert_allclose(a[-1, :7], b[-1, :7], rtol=1e-10)
 
 
 def test_a_failed_solve_stops_the_run_with_a_message_not_a_traceback(tmp_path, caplog):
@@ -477,3 +477,33 @@ def test_dt_growth_limits_the_adapted_step_to_a_factor_of_the_last():
     assert next_dt(limited, Model(5e-4), 0.0, 1e-3) == pytest.approx(5e-4)
     with pytest.raises(ConfigError, match="run.dt_growth"):
         case_from_dict({**data, "run": {**data["run"], "dt_growth": 0.5}})
+
+
+def test_a_failed_two_phase_step_is_retaken_as_two_half_steps(tmp_path):
+    """The loop retakes a failed step of any model that can restore it (here the two-phase flow of
+    still_water): the step's start state comes back and two half steps reach the same time; the
+    series counts the retaken step."""
+    from mpi4py import MPI
+
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.fluid.navier_stokes import NonlinearSolveError
+    from fcm_fsi.simulation.loop import TimeLoop
+    from fcm_fsi.simulation.two_phase import TwoPhaseModel
+    root = Path(__file__).resolve().parents[2]
+    case = load_case(root / "cases" / "still_water.yaml", ["output.xdmf=false", "output.checkpoint=false",
+                                                           "run.cfl=null", "run.dt=0.01", "run.t_end=0.03"])
+    model = TwoPhaseModel(case, MPI.COMM_WORLD)
+    real, calls = model.ns.step, []
+
+    def failing_second_step():
+        calls.append(float(model.ns.dt.value))
+        if len(calls) == 2:
+            real()                                   # leave a half-updated state behind
+            raise NonlinearSolveError(2, 0.004, [1.0], "injected failure")
+        return real()
+    model.ns.step = failing_second_step
+    TimeLoop(case, model, tmp_path, MPI.COMM_WORLD, None).run()
+    assert calls == pytest.approx([0.01, 0.01, 0.005, 0.005, 0.01])
+    assert model.ns.t == pytest.approx(0.03) and model.ns.step_count == 4
+    series = np.genfromtxt(tmp_path / "series.csv", delimiter=",", names=True)
+    assert list(series["retried_steps_"]) == [0, 0, 1, 1]

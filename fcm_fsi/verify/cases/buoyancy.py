@@ -142,7 +142,7 @@ def resting_load(data: dict, comm: MPI.Comm) -> tuple[np.ndarray, int]:
         model.advance(t, DT, timer)
         t += DT
     cells = model.mesh.topology.index_map(model.mesh.topology.dim).size_global
-    return model.force.sum(axis=0), cells
+    return model.exchange.force.sum(axis=0), cells
 
 
 def _vertical(dim: int, force: np.ndarray) -> tuple[float, float]:
