@@ -26,6 +26,16 @@ from .config.case import Case
 __all__ = ["Case", "run"]
 
 
+def write_resolved_case(case: Case, out: Path, rank: int) -> None:
+    """The case as understood (defaults filled in), ``out/case.resolved.yaml``, by rank 0."""
+    if rank == 0:
+        import yaml
+
+        from .config import to_dict
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "case.resolved.yaml").write_text(yaml.safe_dump(to_dict(case), sort_keys=False))
+
+
 def build_model(case: Case, comm, out: Path, restart: str | None, case_dir: Path | None):
     """The model of the physics present in ``case`` (the time loop's protocol)."""
     physics = case.physics
@@ -55,12 +65,7 @@ def run(case: Case, output: str | Path | None = None, *, on_step: Callable[[int,
     from .simulation.loop import TimeLoop
     comm = MPI.COMM_WORLD if comm is None else comm
     out = Path(output if output is not None else case.output.directory)
-    if comm.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-        import yaml
-
-        from .config import to_dict
-        (out / "case.resolved.yaml").write_text(yaml.safe_dump(to_dict(case), sort_keys=False))
+    write_resolved_case(case, out, comm.rank)
     comm.barrier()
     restart = None if restart is None else str(restart)
     model = build_model(case, comm, out, restart, None if case_dir is None else Path(case_dir))

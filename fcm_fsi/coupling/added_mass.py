@@ -42,6 +42,7 @@ from petsc4py import PETSc
 from ..fluid.solvers import DIRECT_LU, make_ksp
 from ..fluid.solvers import solve as solve_ksp
 from ..fluid.tagged_form import TaggedForm
+from ..mesh.build import mesh_extent
 
 #: solver of the pressure-impulse Laplacian (a symmetric positive definite P1 system)
 POISSON_2D = dict(DIRECT_LU)
@@ -78,8 +79,7 @@ class PotentialAddedMass:
         if self.comm.allreduce(open_facets.size, op=MPI.SUM) > 0:
             dofs = fem.locate_dofs_topological(S1, fdim, open_facets)
         else:                     # closed container: p = 0 at the node nearest the lower corner
-            x = mesh.geometry.x[:, :gdim]
-            lo = self.comm.allreduce(x.min(axis=0, initial=np.inf) if len(x) else np.full(gdim, np.inf), op=MPI.MIN)
+            lo = mesh_extent(mesh)[0]
             X = S1.tabulate_dof_coordinates()[:, :gdim]
             nown = S1.dofmap.index_map.size_local
             d = np.linalg.norm(X[:nown] - lo, axis=1) if nown else np.array([np.inf])

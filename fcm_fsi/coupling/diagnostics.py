@@ -19,6 +19,9 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from ..dem.state import kinetic_energy
+from ..fluid.probes import liquid_height
+
 #: blocks whose pose/velocity/load columns go into series.csv (all blocks: bodies.csv)
 SERIES_BLOCKS = 4
 
@@ -129,7 +132,7 @@ class CoupledDiagnostics:
         on = np.abs(x[:n, 0] - x_line) <= 1e-9 * max(1.0, abs(x_line))
         pts = np.concatenate(self.comm.allgather(np.c_[x[:n][on, 1], pf.phi.x.array[:n][on]]))
         pts = pts[np.argsort(pts[:, 0])]
-        return self._y_bottom + float(np.sum(0.5 * (pts[1:, 1] + pts[:-1, 1]) * np.diff(pts[:, 0])))
+        return liquid_height(pts[:, 0], pts[:, 1], self._y_bottom)
 
     def health(self, diag: dict[str, float]) -> str | None:
         """The fluid's checks, then the energy bound (module docstring)."""
@@ -147,11 +150,7 @@ class CoupledDiagnostics:
 
     def block_kinetic_energy(self) -> float:
         """Kinetic energy of the blocks [J; per unit depth in 2D, like the fluid's]."""
-        st = self.dem.system.state
-        R = st.rotation_matrices()
-        w_body = np.einsum("bji,bj->bi", R, st.omega)
-        e = 0.5 * (self.mass * (st.vel ** 2).sum(axis=1) + (self.inertia * w_body ** 2).sum(axis=1))
-        return float(e[~st.fixed].sum()) / self.depth
+        return kinetic_energy(self.dem.system.state, self.mass, self.inertia) / self.depth
 
     def _energy_bound(self, fluid_kinetic: float) -> float | None:
         """What fluid and blocks have now plus g × their mass × the mesh's height along g; None

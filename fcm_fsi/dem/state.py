@@ -142,3 +142,11 @@ class DEMState:
                  "sph_pos", "blk_sph_start")
         return {n: getattr(self, n) for n in names}
 
+
+def kinetic_energy(state: DEMState, mass: np.ndarray, inertia: np.ndarray) -> float:
+    """Translational + rotational kinetic energy [J] of the blocks that are not fixed, with the
+    masses ``mass`` (nb,) [kg] and principal inertias ``inertia`` (nb, 3) [kg m²] given (a coupled
+    run passes the blocks' own, without the added mass)."""
+    w_body = np.einsum("bji,bj->bi", state.rotation_matrices(), state.omega)
+    e = 0.5 * (mass * (state.vel ** 2).sum(axis=1) + (inertia * w_body ** 2).sum(axis=1))
+    return float(e[~state.fixed].sum())

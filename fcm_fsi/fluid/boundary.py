@@ -17,6 +17,7 @@ from mpi4py import MPI
 from ..config.fluid import BoundaryCondition
 from ..config.loader import ConfigError
 from ..config.mesh import box_boundary_names, former_name_message
+from ..mesh.build import mesh_extent
 
 
 def _ramp(t: float, ramp: float) -> float:
@@ -179,8 +180,7 @@ def build_bcs(ns, configs, custom: dict | None = None) -> BCSet:
     if ns.comm.allreduce(bcset.natural_facets.size, op=MPI.SUM) == 0:
         ref = ns.config.pressure_reference
         if ref is None:
-            x = mesh.geometry.x[:, : mesh.geometry.dim]
-            ref = _allreduce(ns.comm, x.min(axis=0), MPI.MIN)
+            ref = mesh_extent(mesh)[0]
         _pin_pressure(ns, ref, bcset)
     return bcset
 

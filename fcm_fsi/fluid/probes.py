@@ -68,16 +68,6 @@ def vertical_line(position: tuple[float, ...], bottom: float, top: float, spacin
 
 
 def liquid_height(z: np.ndarray, phi: np.ndarray, bottom: float) -> float:
-    """The liquid surface elevation [m]: ``bottom`` + ∫φ dz over the samples (trapezoid), φ
-    clipped to [0, 1]."""
-    phi = np.clip(phi, 0.0, 1.0)
+    """The liquid surface elevation [m]: ``bottom`` + ∫φ dz over the samples at heights ``z``
+    (ascending; trapezoid rule)."""
     return bottom + float(np.sum(0.5 * (phi[1:] + phi[:-1]) * np.diff(z)))
-
-
-def mesh_extent(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper corners of the mesh's bounding box [m] (collective)."""
-    x = mesh.geometry.x[:, : mesh.geometry.dim]
-    lo, hi = x.min(axis=0, initial=np.inf), x.max(axis=0, initial=-np.inf)
-    mesh.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
-    mesh.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
-    return lo, hi

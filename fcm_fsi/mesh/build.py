@@ -213,3 +213,12 @@ def gmsh_file(cfg: MeshConfig, comm: MPI.Comm, case_dir: Path | None) -> dmesh.M
                               f"{cfg.dim} (dolfinx takes the cells of the physical groups: add one in gmsh)")
 
     return _from_rank0(comm, cfg.dim, read)
+
+
+def mesh_extent(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners of the mesh's bounding box [m] (collective)."""
+    x = mesh.geometry.x[:, : mesh.geometry.dim]
+    lo, hi = x.min(axis=0, initial=np.inf), x.max(axis=0, initial=-np.inf)
+    mesh.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+    mesh.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+    return lo, hi

@@ -25,6 +25,7 @@ from ..config.loader import ConfigError
 from ..dem.ledger import COLUMNS
 from ..dem.model import build_system
 from ..dem.output import write_pvd, write_vtp
+from ..dem.state import kinetic_energy
 from ..dem.system import substep_count
 from ..io.csv import TimeSeriesCSV
 from ..io.logging import get_logger
@@ -125,7 +126,7 @@ class DEMModel:
         contact = self.system.interactions[0]
         led = self.system.ledger.last if self.system.ledger is not None else {}
         st = self.system.state
-        kinetic = 0.5 * float((st.mass[~st.fixed] * (st.vel[~st.fixed] ** 2).sum(axis=1)).sum())
+        kinetic = kinetic_energy(st, st.mass, st.inertia)
         return {"contacts": float(contact.n_contacts), "neighbour_builds": float(contact.neighbours.builds),
                 "kinetic_energy": kinetic, "energy_balance": float(led.get("balance_rel", np.nan))}
 

@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from ..config.loader import ConfigError
-from ..fluid.probes import PointValues, liquid_height, mesh_extent, vertical_line
+from ..fluid.probes import PointValues, liquid_height, vertical_line
 from ..geometry import quat_to_matrix_np
 from ..io.csv import TimeSeriesCSV
+from ..mesh.build import mesh_extent
 
 UNITS = {"p": "Pa", "u": "m/s", "phi": "-"}
 
@@ -38,6 +39,8 @@ class ProbeRecorder:
         resume = dict(append=True, resume_at=resume_at) if resume_at is not None else {}
         self.probe_csv = self.gauge_csv = None
         if self.probes or self.sensors:
+            self._points = np.array([p.point for p in self.probes], float).reshape(len(self.probes), -1)
+            self._fields_read = sorted({f for p in self.probes for f in p.fields})
             self._fixed = PointValues(self.mesh, len(self.probes))
             self._check_probes()
             self._moving = PointValues(self.mesh, len(self.sensors))
@@ -66,7 +69,7 @@ class ProbeRecorder:
     def _check_probes(self) -> None:
         if not self.probes:
             return
-        points = np.array([p.point for p in self.probes], float)
+        points = self._points
         _, _, found = self._fixed.cells(points)
         solid = self.model.solid_at(points) if hasattr(self.model, "solid_at") else np.zeros(len(points), bool)
         for i, probe in enumerate(self.probes):
@@ -104,10 +107,8 @@ class ProbeRecorder:
         if self.probe_csv is not None:
             row = {}
             if self.probes:
-                points = np.array([p.point for p in self.probes], float)
-                names = sorted({f for p in self.probes for f in p.fields})
-                values, _ = self._fixed.values([self.fields[f] for f in names], points)
-                by_field = dict(zip(names, values))
+                values, _ = self._fixed.values([self.fields[f] for f in self._fields_read], self._points)
+                by_field = dict(zip(self._fields_read, values))
                 for i, probe in enumerate(self.probes):
                     for field in probe.fields:
                         v = by_field[field][i]
@@ -125,7 +126,7 @@ class ProbeRecorder:
             for g, line in zip(self.gauges, self._lines):
                 seg = phi[start: start + len(line), 0]
                 ok = np.isfinite(seg)
-                heights[g.name] = liquid_height(line[ok, -1], seg[ok], self._bottom)
+                heights[g.name] = liquid_height(line[ok, -1], np.clip(seg[ok], 0.0, 1.0), self._bottom)
                 start += len(line)
             self.gauge_csv.write(t=t, **heights)
 

@@ -34,16 +34,6 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="check the case file and run the pre-run checks, then exit (the same as `validate`)")
 
 
-def write_resolved_case(case, out: Path, rank: int) -> None:
-    """The case as understood (defaults filled in), next to the results."""
-    if rank == 0:
-        import yaml
-
-        from ..config import to_dict
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "case.resolved.yaml").write_text(yaml.safe_dump(to_dict(case), sort_keys=False))
-
-
 def reference_blas_loaded(maps: str | None = None) -> bool:
     """True when this process runs on Debian's reference BLAS (``.../blas/libblas.so.3``) and
     no optimised one (OpenBLAS, BLIS, MKL) — direct solves are then ≈ 3× slower
@@ -91,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{args.case}: valid ({case.physics} case '{case.name}'{size})")
         return 0
     out = args.output or Path(case.output.directory)
+    from ..api import write_resolved_case
     write_resolved_case(case, out, comm.rank)
     comm.barrier()
     log.info("case %s (%s) on %d rank(s) -> %s", case.name, case.physics, comm.size, out)

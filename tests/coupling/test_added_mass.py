@@ -36,6 +36,32 @@ def _one_body(msh, level, open_facets, centre):
     return M
 
 
+def _closed_cylinder_added_mass(n: int) -> float:
+    """m_a / ρπR² of the cylinder below in the closed square (p pinned at one node), n × n cells."""
+    R, off = 0.1, np.array([0.0123, 0.0071])
+    msh = _rectangle([-1, -1], [1, 1], (n, n))
+    level = np.linalg.norm(msh.geometry.x[:, :2] - off, axis=1) - R
+    return _one_body(msh, level, np.zeros(0, np.int32), off)[0, 0] / (RHO * np.pi * R ** 2)
+
+
+def test_closed_container_added_mass_is_the_same_on_two_ranks():
+    """With no open boundary the pressure is pinned at the node nearest the mesh's lower corner,
+    found over all ranks: two ranks give the one-rank tensor (to the solver's round-off)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.conftest import mpi_env
+    code = ("from mpi4py import MPI\nfrom tests.coupling.test_added_mass import _closed_cylinder_added_mass\n"
+            "v = _closed_cylinder_added_mass(40)\nif MPI.COMM_WORLD.rank == 0: print(repr(v))")
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run(["mpirun", "-n", "2", sys.executable, "-c", code], cwd=root, env=mpi_env(),
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    two = float(done.stdout.strip().splitlines()[-1])
+    assert two == pytest.approx(_closed_cylinder_added_mass(40), rel=1e-10)
+
+
 @pytest.mark.parametrize("sides", ["open", "closed"])
 def test_cylinder_added_mass_converges_into_the_closed_form_bracket(sides):
     """A cylinder of radius R = 0.1 m, off the mesh lines, in the square |x|, |y| < 1 m with

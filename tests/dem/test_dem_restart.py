@@ -4,15 +4,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from fcm_fsi.api import run
 from fcm_fsi.config.case import case_from_dict
 from fcm_fsi.simulation.dem_model import DEMModel
-from fcm_fsi.simulation.loop import TimeLoop
 from fcm_fsi.verify.cases.dem import repose_config
-
-
-def run_dem_case(case, out, comm, restart):
-    out.mkdir(parents=True, exist_ok=True)
-    TimeLoop(case, DEMModel(case, comm, out, restart=restart is not None), out, comm, restart).run()
 
 
 def case(t_end):
@@ -24,9 +19,9 @@ def case(t_end):
 
 
 def test_restart_is_bit_identical(tmp_path):
-    run_dem_case(case(0.12), tmp_path / "a", MPI.COMM_SELF, None)
-    run_dem_case(case(0.06), tmp_path / "b", MPI.COMM_SELF, None)
-    run_dem_case(case(0.12), tmp_path / "b", MPI.COMM_SELF, str(tmp_path / "b" / "checkpoint.h5"))
+    run(case(0.12), tmp_path / "a", comm=MPI.COMM_SELF)
+    run(case(0.06), tmp_path / "b", comm=MPI.COMM_SELF)
+    run(case(0.12), tmp_path / "b", comm=MPI.COMM_SELF, restart=tmp_path / "b" / "checkpoint.h5")
     with h5py.File(tmp_path / "a" / "checkpoint.h5") as fa, h5py.File(tmp_path / "b" / "checkpoint.h5") as fb:
         assert fa.attrs["step"] == fb.attrs["step"] == 48
         ga, gb = fa["globals"], fb["globals"]
