@@ -28,6 +28,7 @@ _COMMON = (
     "pc_factor_mat_ordering_type", "pc_hypre_type", "pc_gamg_agg_nsmooths", "pc_gamg_threshold",
     "pc_fieldsplit_type", "pc_fieldsplit_schur_fact_type", "pc_fieldsplit_schur_precondition",
     "sub_ksp_type", "sub_pc_type", "sub_pc_factor_levels", "sub_pc_factor_shift_type",
+    "sub_pc_factor_mat_ordering_type",
     "pc_hypre_boomeramg_strong_threshold", "pc_hypre_boomeramg_coarsen_type",
     "pc_hypre_boomeramg_interp_type", "pc_hypre_boomeramg_P_max", "pc_hypre_boomeramg_agg_nl",
     "pc_hypre_boomeramg_max_levels", "mat_mumps_icntl_14", "mat_mumps_icntl_24", "mat_mumps_cntl_1",

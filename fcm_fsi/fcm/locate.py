@@ -11,8 +11,14 @@ above :data:`INSIDE`) keeps it, and only the others are searched in the bounding
 (the cells do not overlap, and dolfinx's contact tolerance is far below :data:`INSIDE` × the
 cell's height), so the result is the search's result; points on or near a face, edge or
 vertex (several cells hold them) and points outside every cell are searched at every call.
+
+:class:`P1Values` evaluates continuous piecewise-linear functions at located points from their
+barycentric coordinates in the cell (a gather and a weighted sum, the same values as dolfinx's
+``Function.eval`` to round-off, without its per-point pull-back).
 """
 from __future__ import annotations
+
+import weakref
 
 import numpy as np
 from dolfinx import geometry
@@ -29,6 +35,73 @@ def first_component_at(fn, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return np.reshape(fn.eval(points, np.asarray(cells, np.int32)), (len(cells), -1))[:, 0]
 
 
+def _is_scalar_p1(space) -> bool:
+    element = space.ufl_element()
+    return (element.family() in ("Lagrange", "P", "CG") and element.degree() == 1
+            and space.dofmap.index_map_bs == 1 and space.dofmap.bs == 1 and len(element.value_shape()) == 0)
+
+
+class P1Values:
+    """Values of P1 functions at points in known owned cells of a simplex ``mesh`` with affine
+    cells: λ = J⁻¹ (x − x₀) once per call, then f(x) = Σ_k λ_k f(vertex k) per function (the
+    P1 dofs of a cell follow its geometry's vertices, dolfinx's local numbering of both).
+    Other elements fall back to ``Function.eval``. :meth:`of` shares one per mesh (the cells'
+    inverse Jacobians are 9 numbers per cell)."""
+
+    _shared: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    @classmethod
+    def of(cls, mesh) -> P1Values:
+        """The one instance for ``mesh``."""
+        if mesh not in cls._shared:
+            cls._shared[mesh] = cls(mesh)
+        return cls._shared[mesh]
+
+    def __init__(self, mesh) -> None:
+        self.mesh = mesh
+        self.dim = mesh.topology.dim
+        imap = mesh.topology.index_map(self.dim)
+        self.n_owned = imap.size_local
+        x = mesh.geometry.x[:, : self.dim]
+        ncells = imap.size_local + imap.num_ghosts
+        # the first dim + 1 geometry nodes of a simplex are its vertices
+        dofs = mesh.geometry.dofmap.array.reshape(ncells, -1)[: self.n_owned, : self.dim + 1]
+        self.origin = x[dofs[:, 0]]                                        # (n_owned, dim)
+        edges = np.stack([x[dofs[:, k]] - self.origin for k in range(1, self.dim + 1)], axis=2)
+        self.inverse = np.linalg.inv(edges)                                # (n_owned, dim, dim)
+        self._cell_dofs = {}                                               # id(space) → (n_owned, dim + 1)
+
+    def barycentric(self, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """(n, dim + 1) barycentric coordinates of ``points`` (n, 3) in the owned ``cells`` (n,),
+        vertex 0 first."""
+        lam = np.einsum("nij,nj->ni", self.inverse[cells], points[:, : self.dim] - self.origin[cells])
+        return np.column_stack([1.0 - lam.sum(axis=1), lam])
+
+    def _dofs(self, space) -> np.ndarray | None:
+        key = id(space)
+        if key not in self._cell_dofs:
+            self._cell_dofs[key] = (space.dofmap.list.array.reshape(-1, self.dim + 1)[: self.n_owned]
+                                    if _is_scalar_p1(space) else None)
+        return self._cell_dofs[key]
+
+    def values(self, functions, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """(len(functions), n): each function's first component at ``points`` (n, 3) in their
+        owned ``cells`` (n,)."""
+        cells = np.asarray(cells, np.int64)
+        out = np.zeros((len(functions), len(cells)))
+        if len(cells) == 0:
+            return out
+        lam = None
+        for j, fn in enumerate(functions):
+            dofs = self._dofs(fn.function_space)
+            if dofs is None:
+                out[j] = first_component_at(fn, points, cells)
+                continue
+            lam = self.barycentric(points, cells) if lam is None else lam
+            out[j] = np.einsum("nk,nk->n", lam, fn.x.array[dofs[cells]])
+        return out
+
+
 class PointLocator:
     """Cells of ``mesh`` (simplices) holding points, for ``nslots`` point slots. Collective
     (:meth:`locate`): the ranks agree on which points are searched again."""
@@ -39,13 +112,7 @@ class PointLocator:
         self.tree = geometry.BoundingBoxTree(mesh, self.dim)
         imap = mesh.topology.index_map(self.dim)
         self.n_owned = imap.size_local
-        x = mesh.geometry.x[:, : self.dim]
-        ncells = imap.size_local + imap.num_ghosts
-        # the first dim + 1 geometry nodes of a simplex are its vertices
-        dofs = mesh.geometry.dofmap.array.reshape(ncells, -1)[: self.n_owned, : self.dim + 1]
-        self._origin = x[dofs[:, 0]]                                       # (n_owned, dim)
-        edges = np.stack([x[dofs[:, k]] - self._origin for k in range(1, self.dim + 1)], axis=2)
-        self._inverse = np.linalg.inv(edges)                               # (n_owned, dim, dim)
+        self.p1 = P1Values.of(mesh)                                         # values at the located points
         self._cell = np.full(int(nslots), -1, np.int64)                    # owned cell held strictly, or −1
         self._kept = np.zeros(int(nslots), bool)                           # some rank holds it strictly
         self.searched = 0                                                  # points searched at the last call
@@ -54,8 +121,7 @@ class PointLocator:
         """Whether ``points`` (n, 3) lie strictly inside the owned ``cells`` (n,)."""
         if len(cells) == 0:
             return np.zeros(0, bool)
-        lam = np.einsum("nij,nj->ni", self._inverse[cells], points[:, : self.dim] - self._origin[cells])
-        return (lam.min(axis=1) > INSIDE) & (1.0 - lam.sum(axis=1) > INSIDE)
+        return self.p1.barycentric(points, cells).min(axis=1) > INSIDE
 
     def locate(self, slots: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(point, cell): every pair of a point of ``points`` (n, 3) and an owned cell of this
@@ -114,10 +180,9 @@ class NearPairs:
         if self._x is None:
             moved = np.ones(nb, bool)
         else:
-            shift = np.linalg.norm(x - self._x, axis=1)
-            far = np.zeros(nb)
-            np.maximum.at(far, self.body, shift)
-            moved = far > 0.5 * self.margin
+            shift = np.einsum("ij,ij->i", x - self._x, x - self._x)
+            moved = np.zeros(nb, bool)
+            moved[self.body[shift > (0.5 * self.margin) ** 2]] = True
         self.searched_bodies = int(np.count_nonzero(moved))
         if moved.any():
             stale = moved[self.body[self._i]] | moved[self.body[self._j]]

@@ -27,7 +27,7 @@ import numpy as np
 from dolfinx import geometry
 from mpi4py import MPI
 
-from ..fcm.locate import first_component_at
+from ..fcm.locate import P1Values
 
 
 def vertical_frame(gravity: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -119,6 +119,7 @@ class ColumnPressure:
         self.eps = 1e-9 * max(float(extent.max()), 1.0)
         self.tree = geometry.BoundingBoxTree(mesh, self.dim)
         self.n_owned = mesh.topology.index_map(self.dim).size_local
+        self.p1 = P1Values.of(mesh)
         self._located = None                                      # (key, point, cell) of the last column set
 
     def _columns(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -184,11 +185,10 @@ class ColumnPressure:
         pts, point, cells = self._locate(cols, nlev)
         functions = ((pressure,) if np.isscalar(density) else (pressure, density)) + (() if level is None else (level,))
         local = np.zeros((len(functions) + 1, len(pts)))
-        for j, fn in enumerate(functions):
-            if point.size:
-                local[j, point] = first_component_at(fn, pts[point], cells)
+        local[:-1, point] = self.p1.values(functions, pts[point], cells)
         local[-1, point] = 1.0
-        total = self.comm.allreduce(local, op=MPI.SUM)
+        total = local
+        self.comm.Allreduce(MPI.IN_PLACE, total, op=MPI.SUM)
         hits = total[-1]
         found = (hits > 0).reshape(len(cols), nlev)
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -137,6 +137,23 @@ def test_a_clump_keeps_the_surface_of_its_union():
     assert connected_components(C, directed=False)[0] == 1
 
 
+def test_a_2d_clump_s_samples_end_at_the_crease():
+    """Two discs of radius 2 cm, centres 2 cm apart, sampled at 0.3 mm (a spacing whose samples
+    straddle the creases): each sample that straddles the other disc keeps the part of its
+    segment outside it, so Σ ds is the union's perimeter 2r(2π − 2 arccos(d/2r)) to s/4 (four
+    clipped ends, each to s/16), and the hydrostatic load −∮ p n ds is Archimedes' ρ g A
+    vertically and below 0.1 % of it sideways (1.4 % when a sample was kept or dropped whole)."""
+    r, d, s = 0.02, 0.02, 0.0003
+    shapes = Shapes.concat([Shapes.sphere((-d / 2, 0.01, 0), r, body=0), Shapes.sphere((d / 2, 0.01, 0), r, body=0)])
+    x, n, ds, _ = body_samples(shapes, 0, s, 2)
+    perimeter = 2 * r * (2 * np.pi - 2 * np.arccos(d / (2 * r)))
+    area = 2 * np.pi * r * r - (2 * r * r * np.arccos(d / (2 * r)) - 0.5 * d * np.sqrt(4 * r * r - d * d))
+    assert abs(ds.sum() - perimeter) <= s / 4
+    force = -((RHO * G * (0.2 - x[:, 1]))[:, None] * n[:, :2] * ds[:, None]).sum(axis=0)
+    assert force[1] == pytest.approx(RHO * G * area, rel=1e-3)
+    assert abs(force[0]) <= 1e-3 * RHO * G * area
+
+
 def test_a_hidden_patch_of_a_box_gets_the_pressure_of_water_at_rest():
     """A turned box (3D): its lowest face and the lower part of its sides hidden. With one
     piezometric pressure round it (water at rest) the harmonic extension over the sample graph
@@ -155,9 +172,11 @@ def test_a_hidden_patch_of_a_box_gets_the_pressure_of_water_at_rest():
 def test_large_hidden_patches_are_solved_by_cg_to_the_direct_solution(monkeypatch):
     """Above DIRECT_LIMIT unknowns the graph Laplacian is solved by preconditioned CG: on a
     2 × 1 × 3 box sampled at 2 cm (45,500 hidden of 55,000 samples) it gives the sparse-LU
-    solution to 1e-9 relative, for a two-column right-hand side, again for the next step's
+    solution, for a two-column right-hand side, again for the next step's
     conductances and values with the preconditioner kept, and for a step whose hidden set has
-    changed (started from the last solution of the samples hidden in both)."""
+    changed (started from the last solution of the samples hidden in both). CG stops at
+    GRAPH_RTOL of the residual, which bounds the solution's error by the graph's condition
+    number × GRAPH_RTOL (measured 4–15 × here); checked to 100 ×."""
     import fcm_fsi.fcm.hidden as hidden_module
     x, n, dA = surface_samples(BOX, np.array([1.0, 0.5, 1.5]), np.zeros(3), np.eye(3), 0.02, 3)
     C = radius_conductance(x, 0.02)
@@ -175,9 +194,10 @@ def test_large_hidden_patches_are_solved_by_cg_to_the_direct_solution(monkeypatc
     hidden3 = x[:, 2] < 1.15                  # the mouth moved: another set of unknowns
     amg3 = interpolate_hidden(hidden3, values2, C2, solver)
     monkeypatch.setattr(hidden_module, "DIRECT_LIMIT", 10 ** 9)
-    np.testing.assert_allclose(amg, interpolate_hidden(hidden, values, C), rtol=1e-9)
-    np.testing.assert_allclose(amg2, interpolate_hidden(hidden, values2, C2), rtol=1e-9)
-    np.testing.assert_allclose(amg3, interpolate_hidden(hidden3, values2, C2), rtol=1e-9)
+    tol = 100 * hidden_module.GRAPH_RTOL
+    np.testing.assert_allclose(amg, interpolate_hidden(hidden, values, C), rtol=tol)
+    np.testing.assert_allclose(amg2, interpolate_hidden(hidden, values2, C2), rtol=tol)
+    np.testing.assert_allclose(amg3, interpolate_hidden(hidden3, values2, C2), rtol=tol)
     # the columns shared out over the ranks (column j on rank j mod size): the same numbers
     shared = hidden_module.LaplaceSolver(MPI.COMM_WORLD)
     monkeypatch.setattr(hidden_module, "DIRECT_LIMIT", 5000)

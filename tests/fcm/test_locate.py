@@ -1,11 +1,11 @@
 """The kept point locations (fcm/locate.py) against a fresh search at every call."""
 import numpy as np
 import pytest
-from dolfinx import geometry, mesh
+from dolfinx import fem, geometry, mesh
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
-from fcm_fsi.fcm.locate import NearPairs, PointLocator
+from fcm_fsi.fcm.locate import NearPairs, P1Values, PointLocator, first_component_at
 
 
 def searched(msh, points):
@@ -76,3 +76,29 @@ def test_near_pairs_equal_a_fresh_search_as_bodies_move():
         np.testing.assert_allclose(d2, np.sum((x[i] - x[j]) ** 2, axis=1))
         if step:
             assert near.searched_bodies <= 2
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_p1_values_equal_dolfinx_eval(dim):
+    """P1 functions (a random field, and x + 2y − z exactly) at random points in their located
+    cells equal ``Function.eval`` to round-off; a P2 function takes the eval fallback."""
+    comm = MPI.COMM_WORLD
+    msh = mesh.create_unit_square(comm, 7, 5) if dim == 2 else mesh.create_unit_cube(comm, 4, 3, 5)
+    rng = np.random.default_rng(11)
+    V = fem.FunctionSpace(msh, ("Lagrange", 1))
+    noise, linear = fem.Function(V), fem.Function(V)
+    noise.x.array[:] = rng.normal(size=noise.x.array.size)
+    noise.x.scatter_forward()
+    linear.interpolate(lambda x: x[0] + 2 * x[1] - x[2])
+    quad = fem.Function(fem.FunctionSpace(msh, ("Lagrange", 2)))
+    quad.interpolate(lambda x: x[0] ** 2 + x[1])
+    points = np.zeros((300, 3))
+    points[:, :dim] = rng.uniform(0.0, 1.0, (300, dim))
+    locator = PointLocator(msh, len(points))
+    point, cell = locator.locate(np.arange(len(points)), points)
+    values = P1Values.of(msh)
+    assert values is locator.p1
+    got = values.values((noise, linear, quad), points[point], cell)
+    for row, fn in zip(got, (noise, linear, quad)):
+        np.testing.assert_allclose(row, first_component_at(fn, points[point], cell), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got[1], points[point] @ np.array([1.0, 2.0, -1.0]), rtol=1e-12, atol=1e-12)
