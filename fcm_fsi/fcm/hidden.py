@@ -224,7 +224,7 @@ CONTACT_MARGIN = 0.5
 #: sparse LU (whose fill-in makes the 10⁵ hidden samples of a building's joints slow)
 DIRECT_LIMIT = 5000
 #: the CG preconditioner of the larger graph Laplacians, and the tolerance relative to ‖rhs‖ (on
-#: the tsunami building's 73,000 joint samples the load moves by 5e-9 of itself from 1e-10 to this,
+#: the tsunami building's 73,000 joint samples the load moves by 3e-9 of itself from 1e-10 to this,
 #: at 2/3 of the iterations)
 GRAPH_PC = "icc"
 GRAPH_RTOL = 1e-8

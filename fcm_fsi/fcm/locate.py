@@ -69,7 +69,7 @@ class P1Values:
         self.origin = x[dofs[:, 0]]                                        # (n_owned, dim)
         edges = np.stack([x[dofs[:, k]] - self.origin for k in range(1, self.dim + 1)], axis=2)
         self.inverse = np.linalg.inv(edges)                                # (n_owned, dim, dim)
-        self._cell_dofs = {}                                               # id(space) → (n_owned, dim + 1)
+        self._cell_dofs = {}              # id(space) → (weak reference to the space, (n_owned, dim + 1) or None)
 
     def barycentric(self, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
         """(n, dim + 1) barycentric coordinates of ``points`` (n, 3) in the owned ``cells`` (n,),
@@ -78,11 +78,14 @@ class P1Values:
         return np.column_stack([1.0 - lam.sum(axis=1), lam])
 
     def _dofs(self, space) -> np.ndarray | None:
-        key = id(space)
-        if key not in self._cell_dofs:
-            self._cell_dofs[key] = (space.dofmap.list.array.reshape(-1, self.dim + 1)[: self.n_owned]
-                                    if _is_scalar_p1(space) else None)
-        return self._cell_dofs[key]
+        """The owned cells' dofs of ``space`` if it is scalar P1, else None; kept per space (an id
+        is checked against the space it was made for: a freed space's id may be reused)."""
+        entry = self._cell_dofs.get(id(space))
+        if entry is None or entry[0]() is not space:
+            dofs = (space.dofmap.list.array.reshape(-1, self.dim + 1)[: self.n_owned]
+                    if _is_scalar_p1(space) else None)
+            entry = self._cell_dofs[id(space)] = (weakref.ref(space), dofs)
+        return entry[1]
 
     def values(self, functions, points: np.ndarray, cells: np.ndarray) -> np.ndarray:
         """(len(functions), n): each function's first component at ``points`` (n, 3) in their
