@@ -85,7 +85,8 @@ def run(argv: list[str]) -> int:
     p.add_argument("--out", type=Path, default=Path("bench_building"), help="output directory")
     args = p.parse_args(argv)
     setup_logging("INFO", rank=0)
-    from ..dem.contact import Materials, SphereContact, damping_ratio
+    from ..dem.contact import Materials, SphereContact
+    from ..dem.restitution import damping_ratio
     from ..dem.system import DEMSystem
     from ..dem.wall_contact import WallContact
 

@@ -12,9 +12,10 @@ from ..config.loader import ConfigError
 from ..geometry import quat_to_matrix_np
 from ..io.logging import get_logger
 from .bodies import BlockTemplate, axis_angle_quat, box_template, clump_template, matrix_to_quat
-from .contact import Materials, damping_ratio
+from .contact import Materials
 from .control import Control, Controls
 from .laws import DEFAULT_LAW, LAWS
+from .restitution import damping_ratio
 from .state import DEMState
 from .system import DEMSystem
 from .walls import walls_of

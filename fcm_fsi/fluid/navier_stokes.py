@@ -36,13 +36,13 @@ from .ns_forms import (
     damping_rate,
     damping_residual,
     do_nothing_correction,
-    epsilon,
     galerkin_residual,
     lsic_residual,
     quadrature_degree,
     supg_pspg_residual,
     tau_expressions,
 )
+from .strain import StrainProjection
 from .tagged_form import TaggedForm
 
 log = get_logger("fluid")
@@ -139,25 +139,12 @@ class NavierStokes:
         self.tau_supg = fem.Function(V0, name="tau_supg")
         self.tau_cont = fem.Function(V0, name="tau_cont")
 
-        self.strain = None
+        self._strain = None
         if config.stabilization.viscous_reconstruction:
-            T = fem.TensorFunctionSpace(mesh, ("Lagrange", 1))
-            self.strain = fem.Function(T, name="strain_p1")
-            psi = ufl.TestFunction(T)
-            # on a cut mesh the projection runs over the fluid part only (the weights change
-            # with the cut, so the lumped mass is re-assembled at every update)
-            dxp = self.dx if dx is not None else ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": 1})
-            self._strain_mass_form = TaggedForm(ufl.inner(ufl.as_matrix([[1.0] * gdim] * gdim), psi) * dxp)
-            self._strain_mass_fixed = dx is None
-            self._strain_lumped = fem.petsc.assemble_vector(self._strain_mass_form.form)
-            self._strain_lumped.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-            self._strain_rhs_vec = self._strain_lumped.duplicate()
-            self._strain_pending = psi
-        self.parts = self._parts()
-        if self.strain is not None:
             u_n, _ = ufl.split(self.U_n)
-            u_extrap = (1 + self.theta) * u_n - self.theta * self.u_nm1
-            self._strain_rhs = TaggedForm(ufl.inner(epsilon(u_extrap), self._strain_pending) * dxp)
+            self._strain = StrainProjection(mesh, dx, self.theta, u_n, self.u_nm1)
+        self.strain = None if self._strain is None else self._strain.field
+        self.parts = self._parts()
         self.residual_ufl = self._residual(extra_terms)
         dU = ufl.TrialFunction(self.W)
         # compiled once; a cut measure's cell tags may change between steps (TaggedForm)
@@ -300,26 +287,9 @@ class NavierStokes:
         self.tau_cont.interpolate(self._tau_exprs[1])
 
     def update_strain(self) -> None:
-        """G = lumped L2 projection onto P1 of ε(ũ), ũ = (1 + θ)uⁿ − θuⁿ⁻¹ ≈ u^{n+θ} (O(Δt²)).
-
-        Fixed during the step, so Newton keeps its quadratic convergence; at a steady state
-        ũ = u and the strong residual is exactly consistent.
-        """
-        if self.strain is None:
-            return
-        if not self._strain_mass_fixed:
-            with self._strain_lumped.localForm() as loc:
-                loc.set(0.0)
-            fem.petsc.assemble_vector(self._strain_lumped, self._strain_mass_form.form)
-            self._strain_lumped.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        b = self._strain_rhs_vec
-        with b.localForm() as loc:
-            loc.set(0.0)
-        fem.petsc.assemble_vector(b, self._strain_rhs.form)
-        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        b.pointwiseDivide(b, self._strain_lumped)
-        b.copy(self.strain.vector)
-        self.strain.x.scatter_forward()
+        """G, the P1 strain of the viscous reconstruction, for this step (:mod:`.strain`)."""
+        if self._strain is not None:
+            self._strain.update()
 
     def _assemble_residual(self) -> float:
         with self.b.localForm() as loc:
@@ -508,36 +478,6 @@ class NavierStokes:
             n += 1
         self.backtracks += n
         return r
-
-    def run_to_steady(self, tol: float, max_steps: int, growth: float = 1.0, dt_max: float = np.inf) -> int:
-        """Pseudo-time march until max|u^{n+1} − uⁿ|/(Δt·max|u|) ≤ tol (1/s); returns steps taken.
-
-        Use θ = 1 and τ without the Δt term (``stabilization.time_term: false``) so the steady
-        state does not depend on Δt. Δt grows by ``growth`` per step up to ``dt_max``
-        (switched evolution relaxation); a failed step is retried once with Δt/4. Collective.
-        """
-        rate = np.inf
-        for k in range(1, max_steps + 1):
-            try:
-                self.step()
-            except NonlinearSolveError:
-                self.U.x.array[:] = self.U_n.x.array
-                self.t -= float(self.dt.value)
-                self.step_count -= 1
-                self.dt.value = float(self.dt.value) / 4
-                log.info("steady march: step %d failed, retrying with dt = %g", k, float(self.dt.value))
-                self.step()
-            du = self.U.x.array[self.V_map] - self.U_n.x.array[self.V_map]
-            local = (np.abs(du).max(initial=0.0), np.abs(self.U.x.array[self.V_map]).max(initial=0.0))
-            dmax = self.comm.allreduce(local[0], op=MPI.MAX)
-            umax = self.comm.allreduce(local[1], op=MPI.MAX)
-            rate = dmax / (float(self.dt.value) * max(umax, 1e-300))
-            log.debug("steady march step %d (dt %g): relative change rate %.3e", k, float(self.dt.value), rate)
-            if rate <= tol:
-                return k
-            self.dt.value = min(float(self.dt.value) * growth, dt_max)
-        raise NonlinearSolveError(self.step_count, self.t, [rate],
-                                  f"no steady state within {max_steps} steps (change rate {rate:.3e} > {tol:g})")
 
     # ---------------------------------------------------------------- helpers
     def boundary_facets(self, name: str) -> np.ndarray:

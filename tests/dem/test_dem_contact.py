@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from fcm_fsi.dem.contact import damping_ratio, restitution_clipped, restitution_unclipped
+from fcm_fsi.dem.restitution import damping_ratio, restitution_clipped, restitution_unclipped
 from fcm_fsi.dem.system import critical_time_step
 from fcm_fsi.verify.cases.dem import _measure_restitution, _slide
 

@@ -16,6 +16,7 @@ from fcm_fsi.config.fluid import BoundaryCondition, FluidConfig
 from fcm_fsi.config.loader import ConfigError
 from fcm_fsi.fluid.forces import ReactionForce
 from fcm_fsi.fluid.navier_stokes import NavierStokes, NonlinearSolveError
+from fcm_fsi.fluid.steady import march_to_steady
 from fcm_fsi.mesh.channel import rectangle
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -30,7 +31,7 @@ def poiseuille(n: int, mu: float = 0.1):
         BoundaryCondition(boundary="ymax", kind="no_slip"),
         BoundaryCondition(boundary="xmax", kind="do_nothing")))
     ns = NavierStokes(tm.mesh, cfg, 1.0, facet_tags=tm.facet_tags, boundary_names=tm.names)
-    ns.run_to_steady(tol=1e-9, max_steps=60)
+    march_to_steady(ns, tol=1e-9, max_steps=60)
     X = ns.V.tabulate_dof_coordinates()
     u = ns.u.x.array.reshape(-1, 2)
     exact = 4 * X[:, 1] * (1 - X[:, 1])

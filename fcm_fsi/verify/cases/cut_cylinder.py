@@ -28,6 +28,7 @@ from ...fcm.levelset import Shapes, StructureLevelSet
 from ...fluid.cut_walls import CutDomain
 from ...fluid.forces import probe
 from ...fluid.navier_stokes import NavierStokes
+from ...fluid.steady import march_to_steady
 from ...io.logging import get_logger
 from ...mesh import channel
 from ..registry import Metric, error_order, register, rel_error_metric, report_only
@@ -85,9 +86,9 @@ def cut_cylinder_solution(comm, dim: int, h_cyl: float, h_far: float, gamma: flo
     ns = NavierStokes(msh, cfg, 1.0 if dim == 2 else 0.5, facet_tags=tm.facet_tags,
                       boundary_names=tm.names, dx=cut.dx, extra_terms=[cut.penalty_term()])
     if dim == 2:
-        steps = ns.run_to_steady(tol=1e-8, max_steps=100, growth=2.0, dt_max=1e4)
+        steps = march_to_steady(ns, tol=1e-8, max_steps=100, growth=2.0, dt_max=1e4)
     else:
-        steps = ns.run_to_steady(tol=1e-6, max_steps=60, growth=2.0, dt_max=1e3)
+        steps = march_to_steady(ns, tol=1e-6, max_steps=60, growth=2.0, dt_max=1e3)
     force, _ = cut.body_forces(1, centre[None])
     scale = 2.0 / (1.0 * U_MEAN ** 2 * 2 * RADIUS * (1.0 if dim == 2 else HEIGHT))
     c_d, c_l = scale * force[0, 0], scale * force[0, 1]

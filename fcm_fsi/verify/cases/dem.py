@@ -13,8 +13,8 @@ import numpy as np
 
 from ...config.dem import DEMConfig
 from ...config.loader import build
-from ...dem.contact import damping_ratio, restitution_clipped, restitution_unclipped
 from ...dem.model import build_system
+from ...dem.restitution import damping_ratio, restitution_clipped, restitution_unclipped
 from ...io.logging import get_logger
 from ..registry import at_least, at_most, in_interval, register, rel_error_metric, report_only
 

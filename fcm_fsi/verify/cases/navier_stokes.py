@@ -18,6 +18,7 @@ from mpi4py import MPI
 from ...config.fluid import BoundaryCondition, FluidConfig, StabilizationConfig
 from ...fluid.forces import ReactionForce, probe
 from ...fluid.navier_stokes import NavierStokes
+from ...fluid.steady import march_to_steady
 from ...io.logging import get_logger
 from ...mesh import channel
 from ..registry import Metric, at_least, at_most, error_order, in_interval, register, rel_error_metric, report_only
@@ -149,7 +150,7 @@ def cavity_solution(comm, re: float, n: int):
     cfg = FluidConfig(density=1.0, viscosity=1.0 / re, boundaries=bcs, theta=1.0, rtol=1e-9, atol=1e-12,
                       stabilization=StabilizationConfig(time_term=False))
     ns = NavierStokes(tm.mesh, cfg, 1.0, facet_tags=tm.facet_tags, boundary_names=tm.names)
-    steps = ns.run_to_steady(tol=1e-7, max_steps=200, growth=1.5, dt_max=1e4)
+    steps = march_to_steady(ns, tol=1e-7, max_steps=200, growth=1.5, dt_max=1e4)
     return ns, steps
 
 
@@ -210,7 +211,7 @@ def cylinder_2d1_solution(comm, h_cyl: float, h_far: float):
     tm = channel.channel_2d(comm, h_cyl=h_cyl, h_far=h_far)
     ns = NavierStokes(tm.mesh, channel_config(0.3, 1.0, False), 1.0,
                       facet_tags=tm.facet_tags, boundary_names=tm.names)
-    ns.run_to_steady(tol=1e-8, max_steps=100, growth=2.0, dt_max=1e4)
+    march_to_steady(ns, tol=1e-8, max_steps=100, growth=2.0, dt_max=1e4)
     force = ReactionForce(ns.W, ns.F_form, ns.boundary_facets("cylinder"))()
     u_mean, diam = 0.2, 0.1
     c_d, c_l = 2 * force / (1.0 * u_mean ** 2 * diam)
@@ -352,7 +353,7 @@ def cylinder_3d1z_solution(comm, h_cyl: float, h_far: float, petsc: dict,
     tm = channel.channel_3d(comm, h_cyl=h_cyl, h_far=h_far, band=band)
     cfg = dataclasses.replace(channel_config(0.45, 1.0, False, petsc), rtol=1e-7)
     ns = NavierStokes(tm.mesh, cfg, 0.5, facet_tags=tm.facet_tags, boundary_names=tm.names)
-    ns.run_to_steady(tol=1e-6, max_steps=60, growth=2.0, dt_max=1e3)
+    march_to_steady(ns, tol=1e-6, max_steps=60, growth=2.0, dt_max=1e3)
     force = ReactionForce(ns.W, ns.F_form, ns.boundary_facets("cylinder"))()
     scale = 2.0 / (1.0 * 0.2 ** 2 * 0.1 * 0.41)
     p = probe(ns.p, np.array([[0.45, 0.2, 0.205], [0.55, 0.2, 0.205]]))
