@@ -11,7 +11,8 @@ from mpi4py import MPI
 from fcm_fsi.config import case_from_dict, load_case
 from fcm_fsi.io.timing import StageTimer
 from fcm_fsi.simulation.two_phase import GAS_PHI, TwoPhaseModel, property_map
-from fcm_fsi.verify.cases.two_phase import period_from_gauge, sloshing_case, still_water_case
+from fcm_fsi.verify.cases.sloshing import period_from_gauge, sloshing_case
+from fcm_fsi.verify.cases.two_phase import still_water_case
 
 ROOT = Path(__file__).resolve().parents[2]
 
