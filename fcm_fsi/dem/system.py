@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from ..io.threads import serial_below
 from . import L_DASHPOT, L_FRICTION, L_SPRING, LEDGER_SLOTS
 from .bodies import update_sphere_positions
 from .contact import HIST, SphereContact
@@ -147,10 +148,15 @@ class DEMSystem:
         st.step += 1
 
     def step(self) -> None:
-        parts = self._fusable()
-        if parts is not None:
-            self._fused_step(*parts)
-            return
+        """One DEM step; a small model (``io.threads.serial_below``) runs its kernels on one thread."""
+        with serial_below(self.state.sph_pos.shape[0]):
+            parts = self._fusable()
+            if parts is not None:
+                self._fused_step(*parts)
+            else:
+                self._staged_step()
+
+    def _staged_step(self) -> None:
         st, dt = self.state, self.dt
         self.compute_forces()
         if self.ledger is not None:

@@ -33,6 +33,7 @@ from ..io.checkpoint import accepted_fingerprints, case_fingerprint, read_checkp
 from ..io.csv import TimeSeriesCSV
 from ..io.fields import FieldWriter
 from ..io.logging import get_logger
+from ..io.threads import use_threads_per_rank
 from ..io.timing import StageTimer, peak_memory_line, peak_memory_mib
 
 log = get_logger("run")
@@ -154,6 +155,8 @@ class TimeLoop:
         self.shared_stop = shared_stop
         self.fingerprint = case_fingerprint(case)
         self.timer = StageTimer()
+        threads = use_threads_per_rank(comm)     # Numba: this rank's share of the node's cores
+        log.info("Numba threads per rank: %d", threads)
         self.step, self.t = 0, 0.0
         self.last_dt = case.run.dt        # the step before the next one (run.dt_growth)
         if restart:
