@@ -9,7 +9,14 @@ import numpy as np
 from ..config.loader import ConfigError
 from ..config.pd import BOND_BASED_POISSON, PDConfig
 from .lattice import in_box, lattice_points
-from .material import critical_stretch, micromodulus, stable_time_step, volume_correction, weibull_fracture_energy
+from .material import (
+    critical_stretch,
+    family_radius,
+    micromodulus,
+    stable_time_step,
+    volume_correction,
+    weibull_fracture_energy,
+)
 from .neighbours import bond_lists, compress, notch_array, notch_keep, transpose
 from .system import Bonds, Loads, PDSystem
 
@@ -21,9 +28,10 @@ def point_volumes(cfg: PDConfig, n: int) -> np.ndarray:
 
 
 def build_bonds(cfg: PDConfig, x: np.ndarray, horizon: np.ndarray, spacing: np.ndarray) -> Bonds:
-    """The owned bonds of every point (|ξ| ≤ δ_p), without those crossing a notch; s0 per bond
-    from G0 (Weibull per bond when a shape is given) and the owner's horizon (eq 10)."""
-    offsets, nbr = bond_lists(x, horizon)
+    """The owned bonds of every point (|ξ| ≤ δ_p + Δx_p/2, weighted by the volume correction β),
+    without those crossing a notch; s0 per bond from G0 (Weibull per bond when a shape is given)
+    and the owner's horizon (eq 10)."""
+    offsets, nbr = bond_lists(x, family_radius(horizon, spacing))
     if cfg.notches:
         keep = notch_keep(x, offsets, nbr, notch_array([n.points for n in cfg.notches], cfg.dim))
         offsets, nbr = compress(offsets, nbr, keep)
@@ -109,7 +117,7 @@ def lattice_stable_time_step(cfg: PDConfig) -> float:
     ax = np.arange(-m, m + 1) * dx
     grid = np.stack(np.meshgrid(*([ax] * dim), indexing="ij"), axis=-1).reshape(-1, dim)
     r = np.linalg.norm(grid, axis=1)
-    r = r[(r > 0) & (r <= delta * (1 + 1e-12))]
+    r = r[(r > 0) & (r <= family_radius(delta, dx) * (1 + 1e-12))]
     nu = BOND_BASED_POISSON[cfg.formulation]
     c = float(micromodulus(cfg.formulation, cfg.material.youngs_modulus, nu, delta, cfg.thickness))
     vol = dx ** 3 if dim == 3 else dx * dx * cfg.thickness

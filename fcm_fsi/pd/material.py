@@ -42,14 +42,22 @@ def critical_stretch(formulation: str, youngs_modulus: float, fracture_energy, h
     carries an extra π in every denominator; with it a crack would absorb G0/π (checked by
     quadrature in tests/pd/test_material.py)."""
     g = np.asarray(fracture_energy, float)
-    return np.sqrt(g / (_STRETCH[formulation] * youngs_modulus * np.asarray(horizon, float)))
+    return np.sqrt(_STRETCH[formulation] * g / (youngs_modulus * np.asarray(horizon, float)))
 
 
 def volume_correction(length, horizon, spacing):
-    """Fraction β of a neighbour's cell inside the horizon (linear partial-volume correction,
-    Madenci & Oterkus 2014 §2.5): 1 for |ξ| ≤ δ − Δx/2, (δ + Δx/2 − |ξ|)/Δx up to δ."""
+    """Fraction β of a neighbour's cell (width Δx) inside the horizon δ, linear in |ξ|: 1 for
+    |ξ| ≤ δ − Δx/2, (δ + Δx/2 − |ξ|)/Δx up to δ + Δx/2, 0 beyond (a linear partial-volume
+    correction, as compared by Seleson 2014). The family of a point is therefore every point
+    within δ + Δx/2: a homogeneous deformation then stores the classical energy to 2.7 % at
+    δ = 3.015 Δx in 2D (6.6 % in 3D), the error falling as Δx/δ (tests/pd/test_material.py)."""
     length, horizon, spacing = (np.asarray(a, float) for a in (length, horizon, spacing))
     return np.clip((horizon + 0.5 * spacing - length) / spacing, 0.0, 1.0)
+
+
+def family_radius(horizon, spacing):
+    """δ + Δx/2 [m]: the farthest neighbour with a part of its cell inside the horizon."""
+    return np.asarray(horizon, float) + 0.5 * np.asarray(spacing, float)
 
 
 def weibull_fracture_energy(mean: float, shape: float | None, count: int, seed: int) -> np.ndarray:
