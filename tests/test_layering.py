@@ -1,7 +1,7 @@
 """Imports go one way (README, "Layout"): every module's imports, read from its syntax tree,
 point to its own package or to a lower layer.
 
-    config, geometry  <  mesh  <  fcm  <  fluid, dem  <  coupling  <  simulation
+    config, geometry  <  mesh  <  fcm  <  fluid, dem, pd  <  coupling  <  simulation
                       <  verify, bench, tools, cli, preflight, __main__
 
 ``io`` (logging, CSV, XDMF, checkpoints, timing) may be imported from anywhere because it
