@@ -396,8 +396,21 @@ def check_dem_time_step(case: Case, ctx: Context) -> Iterator[Finding]:
         yield Finding("error", "", str(err))
 
 
+def check_pd_time_step(case: Case, ctx: Context) -> Iterator[Finding]:
+    """Peridynamic time step: pd.dt ≤ Δt_crit = √(2ρ / Σ_j V_j c_ij/|ξ_ij|) of an interior
+    lattice point (Silling–Askari bound; error; pd/builder.py)."""
+    if case.pd is None:
+        return
+    from .pd.builder import check_time_step, lattice_stable_time_step
+    try:
+        check_time_step(case.pd.dt, lattice_stable_time_step(case.pd))
+    except ConfigError as err:
+        yield Finding("error", "", str(err))
+
+
 CHECKS: tuple[Callable[[Case, Context], Iterator[Finding]], ...] = (
-    check_memory, check_liquid, check_blocks, check_walls, check_points, check_courant, check_dem_time_step)
+    check_memory, check_liquid, check_blocks, check_walls, check_points, check_courant, check_dem_time_step,
+    check_pd_time_step)
 
 
 # ------------------------------------------------------------------ running them

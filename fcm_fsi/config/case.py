@@ -13,6 +13,7 @@ from .fluid import FluidConfig
 from .loader import ConfigError, Variant, apply_override, build, read_yaml
 from .mesh import MeshConfig, former_name_message
 from .output import OutputConfig
+from .pd import PDConfig
 from .phase_field import PhaseFieldConfig
 from .run import RunConfig
 
@@ -28,14 +29,17 @@ class Case:
     phase_field: PhaseFieldConfig | None = param(None, doc="free surface / advected interface")
     fluid: FluidConfig | None = param(None, doc="Navier–Stokes fluid")
     dem: DEMConfig | None = param(None, doc="discrete-element blocks")
+    pd: PDConfig | None = param(None, doc="peridynamic solid (alone: a pd case; docs/peridynamics.md)")
     coupling: CouplingConfig = param(default_factory=CouplingConfig,
                                      doc="fluid ⇄ DEM coupling (used when both fluid and dem are given)")
     output: OutputConfig = param(default_factory=OutputConfig, doc="output settings")
 
     def __post_init__(self) -> None:
-        if self.phase_field is None and self.fluid is None and self.dem is None:
-            raise ConfigError("keys 'phase_field', 'fluid', 'dem' are all missing: the case has no physics "
+        if self.phase_field is None and self.fluid is None and self.dem is None and self.pd is None:
+            raise ConfigError("keys 'phase_field', 'fluid', 'dem', 'pd' are all missing: the case has no physics "
                               "(give at least one)")
+        if self.pd is not None:
+            self._check_pd()
         if (self.phase_field is not None or self.fluid is not None) and self.mesh is None:
             raise ConfigError("key 'mesh' is required when phase_field or fluid is given")
         if self.fluid is not None:
@@ -52,6 +56,23 @@ class Case:
             raise ConfigError("key 'mesh.structure_band' grades the mesh around dem blocks: it needs a coupled "
                               "case (both fluid and dem sections)")
 
+    def _check_pd(self) -> None:
+        """A peridynamic solid runs alone for now (no fluid, phase field or DEM beside it)."""
+        others = [k for k in ("mesh", "phase_field", "fluid", "dem") if getattr(self, k) is not None]
+        if others:
+            raise ConfigError(f"key 'pd': a peridynamic solid runs alone; remove key '{others[0]}' (coupling a pd "
+                              "solid to other physics is not built yet)")
+        n = self.run.dt / self.pd.dt
+        if abs(n - round(n)) > 1e-9 * n:
+            raise ConfigError(f"key 'run.dt' = {self.run.dt:.10g} s: a pd case steps run.dt in whole steps of pd.dt = "
+                              f"{self.pd.dt:.10g} s; allowed: a whole multiple of it (e.g. "
+                              f"{max(round(n), 1) * self.pd.dt:.10g} s)")
+        steps = self.run.t_end / self.run.dt
+        if abs(steps - round(steps)) > 1e-9 * steps:
+            raise ConfigError(f"key 'run.t_end' = {self.run.t_end:.10g} s: a pd case runs whole steps of run.dt = "
+                              f"{self.run.dt:.10g} s; allowed: a whole multiple of it (e.g. "
+                              f"{max(round(steps), 1) * self.run.dt:.10g} s)")
+
     def _check_output(self) -> None:
         """Probes, gauges and sensors: a mesh to sit in, points of its dimension, fields it has."""
         out = self.output
@@ -59,7 +80,7 @@ class Case:
             return
         if self.mesh is None:
             raise ConfigError("keys 'output.probes', 'output.gauges', 'output.sensors' record fields on the mesh: "
-                              "a DEM-only case has none")
+                              "a DEM-only or pd case has none")
         dim = len(self.mesh.lower)
         for i, probe in enumerate(out.probes):
             if len(probe.point) != dim:
@@ -119,7 +140,9 @@ class Case:
 
     @property
     def physics(self) -> str:
-        """Driver name: 'phase_field', 'fluid', 'dem' or 'coupled'."""
+        """Driver name: 'phase_field', 'fluid', 'dem', 'pd' or 'coupled'."""
+        if self.pd is not None:
+            return "pd"
         if self.dem is not None and self.fluid is not None:
             return "coupled"
         if self.fluid is not None:

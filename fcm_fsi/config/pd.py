@@ -1,0 +1,179 @@
+"""Peridynamic solids (section ``pd``; docs/peridynamics.md): bond-based PD in the dual-horizon
+form on a regular lattice, explicit velocity-Verlet time integration, bonds breaking at the
+critical stretch of the fracture energy G0."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from .fields import param
+from .loader import ConfigError
+
+Formulation = Literal["plane_stress", "plane_strain", "3d"]
+
+#: the Poisson ratio a bond-based material has (seed §2 after eq 4): 1/3 in plane stress, 1/4 otherwise
+BOND_BASED_POISSON = {"plane_stress": 1.0 / 3.0, "plane_strain": 0.25, "3d": 0.25}
+#: the most lattice points a case may have (memory: ≈ 30–120 bonds of 40 bytes per point)
+MAX_POINTS = 5.0e7
+
+
+def _box_check(key: str, lower: tuple, upper: tuple, dim: int | None = None) -> None:
+    if len(lower) != len(upper):
+        raise ConfigError(f"key '{key}.lower' = {list(lower)} and 'upper' = {list(upper)} must have as many "
+                          "coordinates")
+    if dim is not None and len(lower) != dim:
+        raise ConfigError(f"key '{key}.lower' = {list(lower)}: give {dim} coordinates for this {dim}D body")
+    if any(a >= b for a, b in zip(lower, upper)):
+        raise ConfigError(f"key '{key}.lower' = {list(lower)} must be below upper = {list(upper)} in every "
+                          "coordinate")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDMaterialConfig:
+    """Isotropic linear-elastic brittle material of a bond-based body."""
+
+    youngs_modulus: float = param(unit="Pa", doc="Young's modulus E (eq 4)", gt=0)
+    poisson_ratio: float | None = param(None, doc="Poisson's ratio ν; bond-based PD fixes it (1/3 plane stress, "
+                                                  "1/4 plane strain and 3D): if given it must be that value",
+                                        gt=0, lt=0.5)
+    density: float = param(unit="kg/m^3", doc="mass density ρ0 (eq 11)", gt=0)
+    fracture_energy: float | None = param(None, unit="J/m^2", doc="fracture energy G0 (mean over the bonds with a "
+                                                                   "Weibull shape) that sets the critical stretch "
+                                                                   "s0 (eq 10); null = bonds never break", gt=0)
+    weibull_shape: float | None = param(None, doc="Weibull shape m of G0 per bond (mean = fracture_energy); null = "
+                                                  "the same G0 for every bond", gt=0, le=100)
+    weibull_seed: int = param(0, doc="random seed of the Weibull draw (reproducible per seed)", ge=0)
+
+    def __post_init__(self) -> None:
+        if self.weibull_shape is not None and self.fracture_energy is None:
+            raise ConfigError("key 'pd.material.weibull_shape' needs pd.material.fracture_energy (its mean)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDLatticeConfig:
+    """A regular lattice of material points filling a box: a point at the centre of every cube
+    (square in 2D) of edge Δx, each with the volume Δx³ (Δx² × thickness in 2D)."""
+
+    lower: tuple[float, ...] = param(unit="m", doc="lower corner of the body, (x, y) or (x, y, z)")
+    upper: tuple[float, ...] = param(unit="m", doc="upper corner of the body")
+    spacing: float = param(unit="m", doc="lattice spacing Δx", gt=0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDVelocityConfig:
+    """Prescribed velocity of the points inside a box (e.g. the grips of a tension test)."""
+
+    lower: tuple[float, ...] = param(unit="m", doc="lower corner of the region")
+    upper: tuple[float, ...] = param(unit="m", doc="upper corner of the region")
+    velocity: tuple[float | None, ...] = param(unit="m/s", doc="velocity per component; null leaves that "
+                                                               "component free")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDTractionConfig:
+    """A traction on a boundary: a body force t / h on the points of a layer of thickness h
+    inside a box, so that the layer carries the force t per unit boundary area."""
+
+    lower: tuple[float, ...] = param(unit="m", doc="lower corner of the boundary layer")
+    upper: tuple[float, ...] = param(unit="m", doc="upper corner of the boundary layer")
+    traction: tuple[float, ...] = param(unit="Pa", doc="traction vector t (force per boundary area)")
+    layer_thickness: float | None = param(None, unit="m", doc="thickness h of the layer (default: one lattice "
+                                                              "spacing Δx)", gt=0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDInitialVelocityConfig:
+    """An initial velocity of the points inside a box (default: the whole body)."""
+
+    velocity: tuple[float, ...] = param(unit="m/s", doc="velocity (amplitude with profile half_cosine)")
+    lower: tuple[float, ...] | None = param(None, unit="m", doc="lower corner of the region (null: the body)")
+    upper: tuple[float, ...] | None = param(None, unit="m", doc="upper corner of the region (null: the body)")
+    profile: Literal["uniform", "half_cosine"] = param("uniform", doc="uniform, or × cos(π (x_a − lower_a) / "
+                                                                      "(upper_a − lower_a)) along axis a: the "
+                                                                      "fundamental mode of a free-free bar")
+    axis: int = param(0, doc="axis a of the half_cosine profile (0 = x)", ge=0, le=2)
+
+    def __post_init__(self) -> None:
+        if (self.lower is None) != (self.upper is None):
+            raise ConfigError("keys 'pd.initial_velocity[].lower' and 'upper' are given together or not at all")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDNotchConfig:
+    """A pre-notch that no bond may cross: a line segment (2D: two points) or a rectangle (3D:
+    a corner and its two neighbouring corners)."""
+
+    points: tuple[tuple[float, ...], ...] = param(unit="m", doc="2D: [start, end]; 3D: [corner, corner + edge 1, "
+                                                                "corner + edge 2] (edges at a right angle)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PDConfig:
+    """A peridynamic solid: bond-based, dual-horizon (eqs 2–4, 9–11 of the seed paper)."""
+
+    model: Literal["bond_based"] = param("bond_based", doc="constitutive model (eq 3)")
+    formulation: Formulation = param(doc="plane_stress, plane_strain (2D, lattice in x, y) or 3d (eq 4)")
+    thickness: float = param(1.0, unit="m", doc="out-of-plane thickness of a 2D body (point volume Δx² × "
+                                                "thickness)", gt=0)
+    material: PDMaterialConfig = param(doc="elastic and fracture properties")
+    lattice: PDLatticeConfig = param(doc="the body's material points")
+    horizon_factor: float = param(3.015, doc="horizon δ = horizon_factor × Δx (the seed uses 3.015–4.015)",
+                                  ge=1.0, le=10.0)
+    dt: float = param(unit="s", doc="time step of the velocity-Verlet integration (eq 11); refused above the "
+                                    "stable step (Silling–Askari bound, the log states it)", gt=0)
+    velocities: tuple[PDVelocityConfig, ...] = param((), doc="prescribed velocities on regions")
+    tractions: tuple[PDTractionConfig, ...] = param((), doc="tractions on boundary layers")
+    initial_velocity: tuple[PDInitialVelocityConfig, ...] = param((), doc="initial velocities (later entries "
+                                                                          "override earlier ones)")
+    notches: tuple[PDNotchConfig, ...] = param((), doc="pre-notches no bond crosses")
+
+    @property
+    def dim(self) -> int:
+        return 3 if self.formulation == "3d" else 2
+
+    @property
+    def horizon(self) -> float:
+        """δ [m]."""
+        return self.horizon_factor * self.lattice.spacing
+
+    def __post_init__(self) -> None:
+        dim = self.dim
+        lat = self.lattice
+        _box_check("pd.lattice", lat.lower, lat.upper, dim)
+        extent = [b - a for a, b in zip(lat.lower, lat.upper)]
+        if lat.spacing > min(extent):
+            raise ConfigError(f"key 'pd.lattice.spacing' = {lat.spacing:g} m is larger than the body's smallest "
+                              f"extent {min(extent):g} m")
+        points = 1.0
+        for e in extent:
+            points *= max(round(e / lat.spacing), 1)
+        if points > MAX_POINTS:
+            raise ConfigError(f"key 'pd.lattice.spacing' = {lat.spacing:g} m gives ≈ {points:.3g} points; allowed "
+                              f"≤ {MAX_POINTS:.0e}")
+        nu = self.material.poisson_ratio
+        fixed = BOND_BASED_POISSON[self.formulation]
+        if nu is not None and abs(nu - fixed) > 1e-9:
+            raise ConfigError(f"key 'pd.material.poisson_ratio' = {nu:g}: bond-based PD in {self.formulation} has "
+                              f"ν = {fixed:.6g}; allowed: {fixed:.6g} or null")
+        for i, v in enumerate(self.velocities):
+            _box_check(f"pd.velocities[{i}]", v.lower, v.upper, dim)
+            if len(v.velocity) != dim or all(c is None for c in v.velocity):
+                raise ConfigError(f"key 'pd.velocities[{i}].velocity' = {list(v.velocity)}: give {dim} components, "
+                                  "at least one a number")
+        for i, t in enumerate(self.tractions):
+            _box_check(f"pd.tractions[{i}]", t.lower, t.upper, dim)
+            if len(t.traction) != dim:
+                raise ConfigError(f"key 'pd.tractions[{i}].traction' = {list(t.traction)}: give {dim} components")
+        for i, v in enumerate(self.initial_velocity):
+            if v.lower is not None:
+                _box_check(f"pd.initial_velocity[{i}]", v.lower, v.upper, dim)
+            if len(v.velocity) != dim:
+                raise ConfigError(f"key 'pd.initial_velocity[{i}].velocity' = {list(v.velocity)}: give {dim} "
+                                  "components")
+            if v.axis >= dim:
+                raise ConfigError(f"key 'pd.initial_velocity[{i}].axis' = {v.axis}: allowed 0 … {dim - 1}")
+        for i, n in enumerate(self.notches):
+            want = 2 if dim == 2 else 3
+            if len(n.points) != want or any(len(p) != dim for p in n.points):
+                raise ConfigError(f"key 'pd.notches[{i}].points': give {want} points of {dim} coordinates "
+                                  f"({'a segment' if dim == 2 else 'a corner and its two neighbours'})")

@@ -1,0 +1,134 @@
+"""The state of a peridynamic body and its velocity-Verlet step (eq 11), with the energy
+account: kinetic, elastic (intact bonds), dissipated (bonds' energy when they broke) and the
+work of the boundary loads (prescribed velocities and tractions)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .forces import break_bonds, damage, force_density
+
+
+@dataclass
+class Bonds:
+    """Owned bonds as CSR (``offsets``, ``nbr``) with ``owner``, the dual lists (``dual_offsets``,
+    ``dual_bond``) and per bond |ξ| ``length`` [m], ``beta`` [-], ``s0`` [-], ``intact`` (uint8)."""
+
+    offsets: np.ndarray
+    nbr: np.ndarray
+    owner: np.ndarray
+    dual_offsets: np.ndarray
+    dual_bond: np.ndarray
+    length: np.ndarray
+    beta: np.ndarray
+    s0: np.ndarray
+    intact: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.nbr)
+
+
+@dataclass
+class Loads:
+    """Boundary loads: ``fixed`` (N, 3) bool, the components with a prescribed velocity
+    ``fixed_velocity`` (N, 3) [m/s]; ``body_force`` (N, 3) [N/m³] from the tractions."""
+
+    fixed: np.ndarray
+    fixed_velocity: np.ndarray
+    body_force: np.ndarray
+
+
+class PDSystem:
+    """Points ``x`` (N, 3) [m] with volumes ``vol`` [m³], ``density`` ρ0 [kg/m³], micromodulus
+    ``modulus`` C(δ_p) (eq 4), their ``bonds`` and ``loads``, stepped by ``dt`` [s]."""
+
+    def __init__(self, x, vol, density: float, modulus, bonds: Bonds, loads: Loads, dt: float,
+                 velocity: np.ndarray | None = None):
+        self.x, self.vol, self.rho, self.modulus = x, vol, float(density), modulus
+        self.bonds, self.loads, self.dt = bonds, loads, float(dt)
+        n = len(x)
+        self.u = np.zeros((n, 3))
+        self.v = np.zeros((n, 3)) if velocity is None else velocity.copy()
+        self.v[loads.fixed] = loads.fixed_velocity[loads.fixed]
+        self.f = np.zeros((n, 3))
+        self.t, self.steps = 0.0, 0
+        self.elastic = self.dissipated = self.work = 0.0
+        self._update_bonds()
+        self.power = self._power()
+        self.initial_energy = self.kinetic() + self.elastic
+
+    # ------------------------------------------------------------ the step
+    def _update_bonds(self) -> None:
+        """Break the bonds past s0, then the force density at the current positions."""
+        b = self.bonds
+        y = self.x + self.u
+        elastic, released = break_bonds(y, b.offsets, b.nbr, b.length, b.beta, b.s0, b.intact, self.modulus,
+                                        self.vol)
+        self.elastic = float(elastic.sum())
+        self.dissipated += float(released.sum())
+        force_density(y, b.offsets, b.nbr, b.dual_offsets, b.dual_bond, b.owner, b.length, b.beta, b.intact,
+                      self.modulus, self.vol, self.f)
+
+    def _kick(self) -> None:
+        """Half a step of acceleration (ρ0 ü = f + b, eq 11); prescribed components keep their velocity."""
+        self.v += (0.5 * self.dt / self.rho) * (self.f + self.loads.body_force)
+        fixed = self.loads.fixed
+        self.v[fixed] = self.loads.fixed_velocity[fixed]
+
+    def _power(self) -> float:
+        """Power of the boundary loads [W]: the tractions on the free components, and on the
+        prescribed ones the force that holds their velocity against the bonds, −f V."""
+        fixed, vol = self.loads.fixed, self.vol[:, None]
+        load = np.where(fixed, -self.f * vol, self.loads.body_force * vol)
+        return float((load * self.v).sum())
+
+    def step(self) -> None:
+        """One velocity-Verlet step: kick, drift, bonds and forces, kick; the loads' work by the
+        trapezoidal rule of their power."""
+        self._kick()
+        self.u += self.dt * self.v
+        self._update_bonds()
+        self._kick()
+        power = self._power()
+        self.work += 0.5 * self.dt * (self.power + power)
+        self.power = power
+        self.t += self.dt
+        self.steps += 1
+
+    # ------------------------------------------------------------ what it reports
+    def kinetic(self) -> float:
+        """½ Σ ρ0 V |v|² [J]."""
+        return 0.5 * self.rho * float((self.vol * (self.v ** 2).sum(axis=1)).sum())
+
+    def damage(self) -> np.ndarray:
+        """D of eq 9 per point."""
+        b = self.bonds
+        return damage(b.offsets, b.nbr, b.beta, b.intact, self.vol)
+
+    def broken(self) -> int:
+        return int(self.bonds.count - np.count_nonzero(self.bonds.intact))
+
+    def energies(self) -> dict[str, float]:
+        """kinetic, elastic, dissipated, external work [J] and the balance K + W + D − work − E(0),
+        zero up to the integration error."""
+        k = self.kinetic()
+        balance = k + self.elastic + self.dissipated - self.work - self.initial_energy
+        return {"kinetic_energy": k, "elastic_energy": self.elastic, "dissipated_energy": self.dissipated,
+                "external_work": self.work, "energy_balance": balance}
+
+    # ------------------------------------------------------------ checkpoint
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"pd__u": self.u, "pd__v": self.v, "pd__f": self.f, "pd__intact": self.bonds.intact,
+                "pd__scalars": np.array([self.t, self.steps, self.elastic, self.dissipated, self.work,
+                                         self.power, self.initial_energy])}
+
+    def load_arrays(self, g: dict[str, np.ndarray]) -> None:
+        self.u[...] = g["pd__u"]
+        self.v[...] = g["pd__v"]
+        self.f[...] = g["pd__f"]
+        self.bonds.intact[...] = g["pd__intact"]
+        t, steps, self.elastic, self.dissipated, self.work, self.power, self.initial_energy = (
+            float(a) for a in g["pd__scalars"])
+        self.t, self.steps = t, int(steps)
