@@ -1,4 +1,5 @@
-"""Rotations by unit quaternions q = (w, x, y, z), body → world: ``x_w = R(q) x_b``.
+"""Rotations by unit quaternions q = (w, x, y, z), body → world: ``x_w = R(q) x_b``; and points
+sorted into the cells of a grid (:func:`sort_by_cell`), the O(N) neighbour searches' first step.
 
 The convention of the DEM state (``fcm_fsi/dem/state.py``) and of the structure level set
 (``fcm_fsi/fcm/levelset.py``); both packages import these helpers from here, so neither
@@ -42,3 +43,28 @@ def quat_to_matrix_np(q: np.ndarray) -> np.ndarray:
     R[..., 2, 1] = 2 * (y * z + w * x)
     R[..., 2, 2] = 1 - 2 * (x * x + y * y)
     return R
+
+
+@nb.njit(cache=True)
+def sort_by_cell(cell, ncell):
+    """Counting sort of points by their cell index ``cell`` (n,) in [0, ncell): (start, order)
+    with the points of cell c at ``order[start[c]:start[c + 1]]``, in increasing point index.
+    NumPy twin: :func:`sort_by_cell_np`."""
+    n = cell.shape[0]
+    start = np.zeros(ncell + 1, np.int64)
+    for i in range(n):
+        start[cell[i] + 1] += 1
+    for c in range(ncell):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[cell[i]]] = i
+        fill[cell[i]] += 1
+    return start, order
+
+
+def sort_by_cell_np(cell: np.ndarray, ncell: int) -> tuple[np.ndarray, np.ndarray]:
+    """Plain-NumPy reference of :func:`sort_by_cell`."""
+    start = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=ncell))]).astype(np.int64)
+    return start, np.argsort(cell, kind="stable").astype(np.int64)

@@ -19,6 +19,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ..geometry import sort_by_cell
+
 
 @nb.njit(cache=True)
 def _grid(sph_pos, cell):
@@ -41,23 +43,13 @@ def _grid(sph_pos, cell):
 @nb.njit(cache=True)
 def _cell_sort(sph_pos, lo, dims, cell):
     ns = sph_pos.shape[0]
-    ncell = dims[0] * dims[1] * dims[2]
     cid = np.empty(ns, np.int64)
     for s in range(ns):
         cx = min(int((sph_pos[s, 0] - lo[0]) / cell), dims[0] - 1)
         cy = min(int((sph_pos[s, 1] - lo[1]) / cell), dims[1] - 1)
         cz = min(int((sph_pos[s, 2] - lo[2]) / cell), dims[2] - 1)
         cid[s] = (cx * dims[1] + cy) * dims[2] + cz
-    start = np.zeros(ncell + 1, np.int64)
-    for s in range(ns):
-        start[cid[s] + 1] += 1
-    for c in range(ncell):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    order = np.empty(ns, np.int64)
-    for s in range(ns):
-        order[fill[cid[s]]] = s
-        fill[cid[s]] += 1
+    start, order = sort_by_cell(cid, dims[0] * dims[1] * dims[2])
     return cid, start, order
 
 

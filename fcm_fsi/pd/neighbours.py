@@ -6,14 +6,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..geometry import sort_by_cell
+
 
 @numba.njit(cache=True)
 def _cells(x, lo, edge, dims):
     """Cell of every point and the points sorted by cell (counting sort): (start[c], order)."""
     n = x.shape[0]
-    ncell = dims[0] * dims[1] * dims[2]
     cell = np.empty(n, np.int64)
-    count = np.zeros(ncell + 1, np.int64)
     for i in range(n):
         c = 0
         for a in range(2, -1, -1):
@@ -21,15 +21,7 @@ def _cells(x, lo, edge, dims):
             k = min(max(k, 0), dims[a] - 1)
             c = c * dims[a] + k
         cell[i] = c
-        count[c + 1] += 1
-    for c in range(ncell):
-        count[c + 1] += count[c]
-    fill = count[:-1].copy()
-    order = np.empty(n, np.int64)
-    for i in range(n):
-        order[fill[cell[i]]] = i
-        fill[cell[i]] += 1
-    return count, order
+    return sort_by_cell(cell, dims[0] * dims[1] * dims[2])
 
 
 @numba.njit(cache=True)

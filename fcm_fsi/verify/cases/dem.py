@@ -16,6 +16,7 @@ from ...config.loader import build
 from ...dem.model import build_system
 from ...dem.restitution import damping_ratio, restitution_clipped, restitution_unclipped
 from ...io.logging import get_logger
+from ..plotting import save_figure
 from ..registry import at_least, at_most, in_interval, register, rel_error_metric, report_only
 
 log = get_logger("verify.dem")
@@ -23,19 +24,6 @@ log = get_logger("verify.dem")
 
 def _cfg(data: dict) -> DEMConfig:
     return build(DEMConfig, data, source="<verify>", prefix="dem")
-
-
-def _plot(out_dir: Path, name: str, comm, draw) -> None:
-    if comm is not None and comm.rank != 0:
-        return
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig = plt.figure(figsize=(6.4, 4.4))
-    draw(fig)
-    fig.tight_layout()
-    fig.savefig(Path(out_dir) / name, dpi=110)
-    plt.close(fig)
 
 
 # ------------------------------------------------------------------------- bounce
@@ -150,7 +138,7 @@ def bounce(level, out_dir: Path, comm) -> list:
         ax2.set_xlabel("bounce")
         ax2.set_ylabel("|ledger balance| / (m g h0)")
         ax2.legend(fontsize=7)
-    _plot(out_dir, "bounce.png", comm, draw)
+    save_figure(out_dir, "bounce.png", comm, draw)
     return metrics
 
 
@@ -227,7 +215,7 @@ def incline(level, out_dir: Path, comm) -> list:
         ax.set_ylabel("slope-parallel velocity [m/s]")
         ax.set_title(f"block on an incline, φ = {phi:g}°")
         ax.legend(fontsize=8)
-    _plot(out_dir, "incline.png", comm, draw)
+    save_figure(out_dir, "incline.png", comm, draw)
     return metrics
 
 
@@ -302,7 +290,7 @@ def free_rotation(level, out_dir: Path, comm) -> list:
         ax2.axhline(1e-6, color="C1", ls="--", lw=0.6)
         ax2.set_xlabel("t [s]")
         ax2.legend(fontsize=7)
-    _plot(out_dir, "free_rotation.png", comm, draw)
+    save_figure(out_dir, "free_rotation.png", comm, draw)
     return metrics
 
 
@@ -382,7 +370,7 @@ def chain_wave(level, out_dir: Path, comm) -> list:
         ax.set_ylabel("v / v₀")
         ax.set_title(f"c = {c_meas:.4g} m/s (chain {c_ref:.4g}, √(k/m)dx = {c0:.4g})")
         ax.legend(fontsize=8)
-    _plot(out_dir, "chain_wave.png", comm, draw)
+    save_figure(out_dir, "chain_wave.png", comm, draw)
     return metrics
 
 
@@ -477,5 +465,5 @@ def repose(level, out_dir: Path, comm) -> list:
         ax.set_ylabel("z [m]")
         ax.legend(fontsize=8)
         ax.set_title(f"{count} clumps, seed 7, t = {t_end} s")
-    _plot(out_dir, "repose.png", comm, draw)
+    save_figure(out_dir, "repose.png", comm, draw)
     return metrics

@@ -18,6 +18,7 @@ from ...io.logging import get_logger
 from ...pd.builder import build_system, lattice_stable_time_step
 from ...pd.forces import force_density
 from ...pd.material import family_radius, micromodulus, volume_correction
+from ..plotting import save_figure
 from ..registry import at_least, at_most, register, report_only
 
 log = get_logger("verify.pd")
@@ -33,19 +34,6 @@ def strip(spacing: float, **over) -> PDConfig:
     d.update(over)
     cfg = build(PDConfig, d, source="<verify>", prefix="pd")
     return dataclasses.replace(cfg, dt=0.5 * lattice_stable_time_step(cfg))
-
-
-def _plot(out_dir: Path, name: str, comm, draw) -> None:
-    if comm is not None and comm.rank != 0:
-        return
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig = plt.figure(figsize=(9.0, 3.8))
-    draw(fig)
-    fig.tight_layout()
-    fig.savefig(Path(out_dir) / name, dpi=110)
-    plt.close(fig)
 
 
 def lattice_moduli(factor: float = FACTOR) -> tuple[float, float]:
@@ -153,7 +141,7 @@ def pd_elastic_wave(level, out_dir: Path, comm) -> list:
         ax2.loglog(delta, [abs(stiff[-1] - bulk) * d / delta[-1] for d in delta], "k--", label="order 1")
         ax2.set_xlabel("horizon δ [m]")
         ax2.legend(fontsize=7)
-    _plot(out_dir, "pd_elastic_wave.png", comm, draw)
+    save_figure(out_dir, "pd_elastic_wave.png", comm, draw, figsize=(9.0, 3.8))
     return metrics
 
 
@@ -232,5 +220,5 @@ def pd_energy(level, out_dir: Path, comm) -> list:
         ax2.loglog(fractions, worst, "s-", label="vibration: max|E/E0 − 1|")
         ax2.set_xlabel("dt / Δt_crit")
         ax2.legend(fontsize=7)
-    _plot(out_dir, "pd_energy.png", comm, draw)
+    save_figure(out_dir, "pd_energy.png", comm, draw, figsize=(9.0, 3.8))
     return metrics
