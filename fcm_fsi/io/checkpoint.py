@@ -32,6 +32,10 @@ from ..config.mesh import FORMER_BOX_NAMES, box_boundary_names
 # accepted when the case leaves the option at that value (and only then). Add new options here.
 # The section is a dotted path; a trailing "[]" names a list whose every entry has the option.
 # Listed in the order the options were added.
+#: top-level sections of the case added after checkpoints were written (``pd``): a case without
+#: them keeps the fingerprint it had before they existed
+ADDED_SECTIONS: tuple[str, ...] = ("pd",)
+
 ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("coupling", "load_split", "owner"),
     ("coupling", "wall_motion", "block"),
@@ -77,6 +81,9 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
     ``without``: (section, key) options left out, as in checkpoints written before they existed.
     ``former_names``: the boundaries under their names before they were named by axis."""
     data = to_dict(case)
+    for name in ADDED_SECTIONS:          # absent, a section added later leaves the hash as it was
+        if data.get(name, 0) is None:
+            data.pop(name)
     if former_names:
         _former_boundary_names(data)
     for key in ("t_end", "log_every", "output_every", "checkpoint_every"):

@@ -153,6 +153,25 @@ def test_fingerprint_ignores_the_solver_choice_but_not_the_physics(root):
     assert legacy != base and case_fingerprint(load_case(path, solver[:1]), legacy=True) != legacy
 
 
+def test_a_section_added_later_leaves_the_fingerprint_of_cases_without_it(root, monkeypatch):
+    """Checkpoints written before the ``pd`` section existed still restart: a case without it
+    hashes as if the section did not exist in the schema."""
+    from fcm_fsi.config.case import load_case
+    from fcm_fsi.io import checkpoint
+    case = load_case(root / "cases" / "block_overturn.yaml")
+    now = checkpoint.case_fingerprint(case)
+    schema_before = checkpoint.to_dict
+
+    def without_pd(c):
+        data = schema_before(c)
+        assert "pd" in data and data["pd"] is None
+        del data["pd"]
+        return data
+
+    monkeypatch.setattr(checkpoint, "to_dict", without_pd)
+    assert checkpoint.case_fingerprint(case) == now
+
+
 def test_a_checkpoint_is_accepted_under_any_of_the_given_fingerprints(tmp_path):
     from mpi4py import MPI
 
