@@ -183,9 +183,9 @@ def case_from_dict(data: dict, source: str = "<dict>") -> Case:
     return _build_levels(data, source, [])
 
 
-def _build_levels(data: dict, source: str, overrides: list[str], base: Path | None = None) -> Case:
+def _build_levels(data: dict, source: str, overrides: list[str], folder: Path | None = None) -> Case:
     """The case of the chosen level; the other levels are built (validated) and dropped. Block
-    files are relative to ``base`` (the case file's folder; None: the working directory)."""
+    files are relative to ``folder`` (the case file's folder; None: the working directory)."""
     levels, chosen = _levels(data, source)
     base = {k: v for k, v in data.items() if k not in ("resolutions", "resolution")}
     order = [chosen] + [name for name in levels if name != chosen] if levels else [None]
@@ -194,8 +194,8 @@ def _build_levels(data: dict, source: str, overrides: list[str], base: Path | No
         merged = copy.deepcopy(base if name is None else _merged(base, levels[name]))
         for assignment in overrides:
             apply_override(merged, assignment)
-        if base is not None:
-            block_files_resolved(merged, base)
+        if folder is not None:
+            block_files_resolved(merged, folder)
         variant = None if name is None else Variant(name, levels[name])
         where = source if name is None else f"{source} [resolution '{name}']"
         cases.append(build(Case, merged, source=where, variant=variant))

@@ -75,7 +75,7 @@ def skin_sphere_centres(surface: ClosedSurface, radius: float, spacing: float) -
     lo, hi = surface.vertices.min(axis=0) + radius, surface.vertices.max(axis=0) - radius
     axes = []
     for a, b in zip(lo, hi):
-        n = int(np.ceil((b - a) / spacing)) + 1 if b > a else 1
+        n = int(np.ceil((b - a) / spacing * (1 - 1e-6))) + 1 if b > a else 1     # a float32 file's ties
         axes.append(np.linspace(a, b, n) if b > a else np.array([0.5 * (a + b)]))
     step = max((ax[1] - ax[0]) if len(ax) > 1 else 0.0 for ax in axes)
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
