@@ -162,7 +162,7 @@ def block_boxes(case: Case, state, structure) -> tuple[np.ndarray, np.ndarray, n
     if case.dem is None or case.mesh is None:
         return None
     from .coupling.dem_side import shapes_of_blocks
-    from .fcm.levelset import SPHERE
+    from .fcm.levelset import MESH, SPHERE
     from .geometry import quat_to_matrix_np
     shapes = shapes_of_blocks(case.dem, state, case.coupling.min_thickness, structure)
     R = quat_to_matrix_np(state.quat)
@@ -170,9 +170,16 @@ def block_boxes(case: Case, state, structure) -> tuple[np.ndarray, np.ndarray, n
     lo, hi = np.full((nb, 3), np.inf), np.full((nb, 3), -np.inf)
     area = 0.0
     d = case.mesh.dim
-    for kind, b, off, rot, half in zip(shapes.kind, shapes.body, shapes.offset, shapes.rot, shapes.half):
+    for kind, b, off, rot, half, tri in zip(shapes.kind, shapes.body, shapes.offset, shapes.rot, shapes.half,
+                                            shapes.triangles):
         Rb = R[b]
         centre = state.pos[b] + Rb @ off
+        if kind == MESH:                     # the surface's own extent, not its distance grid's
+            corners = tri.reshape(-1, 3) @ (Rb @ rot).T
+            lo[b] = np.minimum(lo[b], centre + corners.min(axis=0))
+            hi[b] = np.maximum(hi[b], centre + corners.max(axis=0))
+            area += 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+            continue
         if kind == SPHERE:
             extent = np.full(3, half[0])
             area += 4 * math.pi * half[0] ** 2 if d == 3 else 2 * math.pi * half[0]

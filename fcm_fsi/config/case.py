@@ -126,6 +126,12 @@ class Case:
         if dim == 2 and self.coupling.depth is None:
             raise ConfigError("key 'coupling.depth' is required for a 2D fluid with dem blocks: the out-of-plane "
                               "extent (m) that turns the fluid's force per unit depth into a force")
+        meshes = [f"dem.blocks[{i}]" for i, b in enumerate(self.dem.blocks) if b.shape == "mesh"]
+        meshes += [f"dem.generators[{i}].block" for i, g in enumerate(self.dem.generators) if g.block.shape == "mesh"]
+        if dim == 2 and meshes:
+            raise ConfigError(f"key '{meshes[0]}.shape' = 'mesh' needs a 3D fluid: a 2D fluid sees its blocks as "
+                              "prisms along z, and a surface from a CAD file is no prism (use a 3D mesh, or a box "
+                              "or clump block)")
 
     @classmethod
     def from_yaml(cls, path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Case:
@@ -176,7 +182,22 @@ def load_case(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> 
         apply_override(data, assignment)
     later = [a for a in overrides
              if a.split("=", 1)[0].strip().split(".")[0] not in ("resolution", "resolutions")]
-    return _build_levels(data, str(path), later)
+    return _build_levels(data, str(path), later, Path(path).parent)
+
+
+def block_files_resolved(data: dict, base: Path) -> dict:
+    """``data`` with the relative ``file`` of every ``dem.blocks[]`` and ``dem.generators[].block``
+    made relative to ``base`` (the case file's folder), so that a case runs from any directory."""
+    dem = data.get("dem")
+    if not isinstance(dem, dict):
+        return data
+    blocks = [b for b in dem.get("blocks") or () if isinstance(b, dict)] if isinstance(dem.get("blocks"), list) else []
+    if isinstance(dem.get("generators"), list):
+        blocks += [g["block"] for g in dem["generators"] if isinstance(g, dict) and isinstance(g.get("block"), dict)]
+    for b in blocks:
+        if isinstance(b.get("file"), str) and b["file"] and not Path(b["file"]).is_absolute():
+            b["file"] = str(base / b["file"])
+    return data
 
 
 def case_from_dict(data: dict, source: str = "<dict>") -> Case:
@@ -185,8 +206,9 @@ def case_from_dict(data: dict, source: str = "<dict>") -> Case:
     return _build_levels(data, source, [])
 
 
-def _build_levels(data: dict, source: str, overrides: list[str]) -> Case:
-    """The case of the chosen level; the other levels are built (validated) and dropped."""
+def _build_levels(data: dict, source: str, overrides: list[str], folder: Path | None = None) -> Case:
+    """The case of the chosen level; the other levels are built (validated) and dropped. Block
+    files are relative to ``folder`` (the case file's folder; None: the working directory)."""
     levels, chosen = _levels(data, source)
     base = {k: v for k, v in data.items() if k not in ("resolutions", "resolution")}
     order = [chosen] + [name for name in levels if name != chosen] if levels else [None]
@@ -195,6 +217,8 @@ def _build_levels(data: dict, source: str, overrides: list[str]) -> Case:
         merged = copy.deepcopy(base if name is None else _merged(base, levels[name]))
         for assignment in overrides:
             apply_override(merged, assignment)
+        if folder is not None:
+            block_files_resolved(merged, folder)
         variant = None if name is None else Variant(name, levels[name])
         where = source if name is None else f"{source} [resolution '{name}']"
         cases.append(build(Case, merged, source=where, variant=variant))

@@ -31,16 +31,31 @@ class MaterialConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class BlockConfig:
-    """One rigid block: a solid box tiled by surface spheres, one sphere, or a clump."""
+    """One rigid block: a solid box tiled by surface spheres, one sphere, a clump, or a solid
+    read from a CAD surface file (docs/dem.md, "Structures from CAD files")."""
 
-    shape: Literal["box", "sphere", "clump"] = param(doc="box: solid box with spheres on its surface (mass from the "
-                                                         "box); sphere: one sphere; clump: mass from its spheres")
+    shape: Literal["box", "sphere", "clump", "mesh"] = param(doc="box: solid box with spheres on its surface (mass "
+                                                                 "from the box); sphere: one sphere; clump: mass from "
+                                                                 "its spheres; mesh: the solid bounded by the closed "
+                                                                 "surface in file (mass from it), spheres in its skin")
     material: str = param(doc="material name")
-    position: Vec3 = param(unit="m", doc="centre of mass (box, sphere) or origin of the clump's sphere coordinates")
+    position: Vec3 = param(unit="m", doc="centre of mass (box, sphere) or origin of the clump's sphere coordinates "
+                                         "or of the mesh file's coordinates")
     size: Vec3 | None = param(None, unit="m", doc="box edge lengths (shape box)", gt=0)
-    radius: float | None = param(None, unit="m", doc="sphere radius (shape sphere) or surface-sphere radius (shape box)", gt=0)
-    spacing: float | None = param(None, unit="m", doc="largest surface-sphere centre spacing on a box edge (default "
-                                                      "2·radius)", gt=0)
+    radius: float | None = param(None, unit="m", doc="sphere radius (shape sphere) or surface-sphere radius (shape box, "
+                                                     "mesh)", gt=0)
+    spacing: float | None = param(None, unit="m", doc="largest surface-sphere centre spacing on a box edge, or the "
+                                                      "sphere lattice's spacing of shape mesh (default 2·radius)", gt=0)
+    file: str = param("", doc="closed surface file of shape mesh: STL (ASCII or binary), OBJ, gmsh .msh or another "
+                              "format meshio reads (relative to the case file)")
+    scale: float = param(1.0, doc="factor from the file's coordinates to metres (shape mesh)", gt=0)
+    fill: Literal["clump"] = param("clump", doc="shape mesh: clump: one rigid block, its contact spheres on a lattice "
+                                                "in the solid's skin")
+    sdf_spacing: float | None = param(None, unit="m", doc="shape mesh: node spacing of the signed-distance grid the "
+                                                          "fluid sees (default radius/2)", gt=0)
+    sdf_margin: float | None = param(None, unit="m", doc="shape mesh: how far that grid reaches beyond the surface; "
+                                                         "must be at least the level-set band coupling.band (default "
+                                                         "a quarter of the solid's largest extent)", gt=0)
     spheres: tuple[tuple[float, float, float, float], ...] = param((), unit="m", doc="clump spheres as (x, y, z, r) "
                                                                                      "relative to position")
     axis: Vec3 = param((0.0, 0.0, 1.0), doc="rotation axis of the initial orientation")
@@ -56,6 +71,8 @@ class BlockConfig:
             raise ConfigError("key 'dem.blocks[].size' and 'radius' are required for shape 'box'")
         if self.shape == "sphere" and self.radius is None:
             raise ConfigError("key 'dem.blocks[].radius' is required for shape 'sphere'")
+        if self.shape == "mesh" and (not self.file or self.radius is None):
+            raise ConfigError("key 'dem.blocks[].file' and 'radius' are required for shape 'mesh'")
         if self.shape == "clump" and not self.spheres:
             raise ConfigError("key 'dem.blocks[].spheres' must list at least one (x, y, z, r) for shape 'clump'")
         if any(s[3] <= 0 for s in self.spheres):

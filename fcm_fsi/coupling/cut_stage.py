@@ -14,7 +14,7 @@ from mpi4py import MPI
 
 from ..config.loader import ConfigError
 from ..dem.walls import gap_walls
-from ..fcm.levelset import StructureLevelSet
+from ..fcm.levelset import StructureLevelSet, grid_margin
 from ..fluid.phase_field import property_map
 from ..io.logging import get_logger
 from .dem_side import fluid_thickness
@@ -47,6 +47,12 @@ class CutStage:
         if self.gap >= self.band:
             raise ConfigError(f"key 'coupling.gap_fill' = {self.gap:.4g} m: allowed 0 ≤ gap_fill < the level-set "
                               f"band {self.band:.4g} m (coupling.band, default 2 × the largest cell)")
+        short = np.flatnonzero(grid_margin(shapes) < self.band)
+        if short.size:
+            raise ConfigError(f"key 'dem.blocks[].sdf_margin': the signed-distance grid of block {shapes.body[short[0]]} "
+                              f"reaches {grid_margin(shapes)[short[0]]:.4g} m beyond its surface, less than the "
+                              f"level-set band {self.band:.4g} m (coupling.band, default 2 × the largest cell): "
+                              "raise sdf_margin")
         self.levelset = StructureLevelSet(shapes, nb, self.band, gap=self.gap, walls=gap_walls(case.dem, self.gdim))
         self.points = np.zeros((cut.nodes.shape[0], 3))
         self.points[:, : self.gdim] = cut.nodes[:, : self.gdim]

@@ -40,11 +40,13 @@ from typing import Literal
 import numpy as np
 
 from ..config.dem import DEMConfig
+from ..dem.mesh_block import MeshBlock, mesh_block
 from ..dem.model import build_structure, template_of
 from ..dem.state import DEMState
 from ..dem.system import DEMSystem, substep_count
-from ..fcm.levelset import BOX, SPHERE, Shapes
+from ..fcm.levelset import BOX, MESH, SPHERE, Shapes
 from ..geometry import quat_to_matrix_np
+from ..geometry.surface_distance import DistanceGrid, distance_grid
 
 __all__ = ["DEMSubcycler", "Exchange", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio",
            "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity", "shapes_of_blocks", "state_digests", "substep_count"]
@@ -56,16 +58,20 @@ REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # com
 def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0, structure=None) -> Shapes:
     """Level-set primitives of every block of ``build_state(cfg)`` in its body (principal)
     frame: a box block is one solid box of its size [m], sphere and clump blocks are the union
-    of their spheres, structure blocks are the boxes lo..hi of the builder (its fixed foundation
+    of their spheres, a mesh block its surface (:func:`_mesh_shape`; never widened), structure
+    blocks are the boxes lo..hi of the builder (its fixed foundation
     has none: it lies under the ground, the fluid never sees it). The world shape of block b is
     ``pos[b] + R(quat[b]) (offset + rot x_shape)``. Box edges shorter than ``min_thickness``
     [m] are widened to it about the box centre (``coupling.min_thickness``:
     a wall thinner than a cell would otherwise fall between the mesh nodes and leak).
     ``structure``: the built ``dem.structure`` when the caller has it (built here otherwise)."""
     parts, first = [], 0
-    for b, count in _described_blocks(cfg):
+    for (b, count), key in zip(_described_blocks(cfg), _block_keys(cfg)):
         blocks = np.arange(first, first + count)
-        if b.shape == "box":
+        if b.shape == "mesh":
+            density = cfg.materials[cfg.material_index(b.material)].density
+            parts.extend(_mesh_shape(b, mesh_block(b, density, key), k) for k in blocks)
+        elif b.shape == "box":
             density = cfg.materials[cfg.material_index(b.material)].density
             # R_body: principal → description frame, so the box axes in the body frame are its
             # transpose; the solid box's centre is its centre of mass (offset 0).
@@ -135,11 +141,15 @@ def fluid_gyration_ratio(cfg: DEMConfig, state: DEMState, min_thickness: float, 
 def fluid_thickness(cfg: DEMConfig, state: DEMState, min_thickness: float, gdim: int) -> np.ndarray:
     """Per block (nb,): its thinnest extent [m] as the fluid sees it — the shortest edge of a
     box block after the ``min_thickness`` widening (in 2D not the depth along z), the smallest
-    sphere diameter of a sphere or clump block. A wall must be about two cells thick to hold a
-    pressure difference (docs/coupling.md, 'Thin walls')."""
+    sphere diameter of a sphere or clump block, twice the deepest point's depth of a mesh block.
+    A wall must be about two cells thick to hold a pressure difference (docs/coupling.md, 'Thin
+    walls')."""
     shapes = shapes_of_blocks(cfg, state, min_thickness)
     extent = np.where(shapes.kind[:, None] == BOX, 2.0 * shapes.half, np.inf)
     extent[:, 0] = np.where(shapes.kind == SPHERE, 2.0 * shapes.half[:, 0], extent[:, 0])
+    for s in np.flatnonzero(shapes.kind == MESH):           # the deepest point's depth × 2 (a box: its
+        start, nx, ny, nz = shapes.grid[s]                  # thinnest edge), to the grid's resolution
+        extent[s, 0] = -2.0 * shapes.values[start:start + nx * ny * nz].min()
     boxes = np.flatnonzero(shapes.kind == BOX)
     extent[boxes] = np.where(_depth_axes(shapes, boxes, state, gdim), np.inf, extent[boxes])
     thin = np.full(state.nb, np.inf)
@@ -162,6 +172,38 @@ def _described_blocks(cfg: DEMConfig):
         yield b, 1
     for g in cfg.generators:
         yield g.block, g.count
+
+
+def _block_keys(cfg: DEMConfig):
+    """The key path of each entry of :func:`_described_blocks` (for errors)."""
+    yield from (f"dem.blocks[{i}]" for i in range(len(cfg.blocks)))
+    yield from (f"dem.generators[{i}].block" for i in range(len(cfg.generators)))
+
+
+def _mesh_shape(b, block: MeshBlock, k: int) -> Shapes:
+    """Block ``k`` of shape mesh as the fluid sees it: its surface's signed-distance grid
+    (node spacing ``sdf_spacing``, default radius/2; reaching ``sdf_margin`` beyond the
+    surface, default a quarter of its largest extent), in the body (principal) frame: the
+    file's point x is at R_bodyᵀ (x − com)."""
+    spacing = b.sdf_spacing if b.sdf_spacing is not None else 0.5 * b.radius
+    margin = b.sdf_margin if b.sdf_margin is not None else 0.25 * float(np.ptp(block.surface.vertices, axis=0).max())
+    grid = _distance_grid(b.file, b.scale, float(spacing), float(margin), block.surface)
+    to_body = block.template.R_body.T
+    return Shapes.mesh(grid, block.surface.corners, origin=-to_body @ block.properties.centre, rot=to_body, body=k)
+
+
+_GRIDS: dict = {}
+
+
+def _distance_grid(file: str, scale: float, spacing: float, margin: float, surface) -> DistanceGrid:
+    """:func:`~fcm_fsi.geometry.surface_distance.distance_grid`, kept per (file, scale,
+    spacing, margin): the case asks for the blocks' shapes more than once."""
+    key = (file, scale, spacing, margin)
+    if key not in _GRIDS:
+        if len(_GRIDS) > 16:
+            _GRIDS.clear()
+        _GRIDS[key] = distance_grid(surface, spacing, margin)
+    return _GRIDS[key]
 
 
 def _boxes(blocks: np.ndarray, half, rot) -> Shapes:

@@ -7,7 +7,7 @@ frame is the principal frame: ``sph_local`` is expressed in it, ``inertia`` is d
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba as nb
 import numpy as np
@@ -19,13 +19,15 @@ from ..geometry import rotate
 class BlockTemplate:
     """One block shape in its principal frame: mass [kg], principal inertia [kg m²],
     sphere offsets from the centre of mass [m] and radii [m], plus the rotation
-    ``R_body`` (principal → the frame the shape was described in)."""
+    ``R_body`` (principal → the frame the shape was described in) and the centre of mass
+    ``com`` [m] in that frame where it is not its origin (a block from a CAD file)."""
 
     mass: float
     inertia: np.ndarray
     sph_local: np.ndarray
     sph_radius: np.ndarray
     R_body: np.ndarray
+    com: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def box_template(size, density: float, radius: float, spacing: float | None = None) -> BlockTemplate:

@@ -15,6 +15,7 @@ from .bodies import BlockTemplate, axis_angle_quat, box_template, clump_template
 from .contact import Materials
 from .control import Control, Controls
 from .laws import DEFAULT_LAW, LAWS
+from .mesh_block import mesh_block
 from .restitution import damping_ratio
 from .state import DEMState
 from .system import DEMSystem
@@ -23,8 +24,11 @@ from .walls import walls_of
 log = get_logger("dem")
 
 
-def template_of(b: BlockConfig, density: float) -> BlockTemplate:
-    """Mass properties and spheres of one block description (principal frame)."""
+def template_of(b: BlockConfig, density: float, key: str = "dem.blocks[]") -> BlockTemplate:
+    """Mass properties and spheres of one block description (principal frame); ``key`` names
+    the block in errors about its file (shape mesh)."""
+    if b.shape == "mesh":
+        return mesh_block(b, density, key).template
     if b.shape == "box":
         return box_template(b.size, density, b.radius, b.spacing)
     if b.shape == "sphere":
@@ -89,6 +93,8 @@ def build_state(cfg: DEMConfig, structure=None) -> DEMState:
             s = np.asarray(b.spheres)[:, :3]
             ms = s[:, 0] * 0 + np.asarray(b.spheres)[:, 3] ** 3
             origin_shift = (ms[:, None] * s).sum(0) / ms.sum()
+        if b.shape == "mesh" and not p_is_com:    # the file's origin at `position`: move to the com
+            origin_shift = tmpl.com
         pos.append(np.asarray(p) + quat_to_matrix_np(np.asarray(q_user)) @ origin_shift)
         quat.append(q)
         mass.append(tmpl.mass)
@@ -101,12 +107,12 @@ def build_state(cfg: DEMConfig, structure=None) -> DEMState:
         sr.extend(tmpl.sph_radius)
         sm.extend([cfg.material_index(b.material)] * len(tmpl.sph_radius))
 
-    for b in cfg.blocks:
+    for i, b in enumerate(cfg.blocks):
         dens = cfg.materials[cfg.material_index(b.material)].density
-        add(template_of(b, dens), b, b.position, axis_angle_quat(b.axis, math.radians(b.angle)))
-    for g in cfg.generators:
+        add(template_of(b, dens, f"dem.blocks[{i}]"), b, b.position, axis_angle_quat(b.axis, math.radians(b.angle)))
+    for i, g in enumerate(cfg.generators):
         dens = cfg.materials[cfg.material_index(g.block.material)].density
-        tmpl = template_of(g.block, dens)
+        tmpl = template_of(g.block, dens, f"dem.generators[{i}].block")
         P, Q = _generated(g, tmpl)
         for p, q in zip(P, Q):
             add(tmpl, g.block, p, q, p_is_com=True)

@@ -10,46 +10,9 @@ import math
 import numba as nb
 import numpy as np
 
+from ..geometry.surface_distance import closest_point_triangle
 from . import L_DASHPOT, L_FRICTION, L_SPRING
 from .contact import HIST, Materials, _add_load, _law, _pointvel, _release, material_table
-
-
-@nb.njit(cache=True)
-def closest_point_triangle(px, py, pz, a, b, c):
-    """Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision Detection §5.1.5)."""
-    abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    acx, acy, acz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
-    apx, apy, apz = px - a[0], py - a[1], pz - a[2]
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
-    if d1 <= 0.0 and d2 <= 0.0:
-        return a[0], a[1], a[2]
-    bpx, bpy, bpz = px - b[0], py - b[1], pz - b[2]
-    d3 = abx * bpx + aby * bpy + abz * bpz
-    d4 = acx * bpx + acy * bpy + acz * bpz
-    if d3 >= 0.0 and d4 <= d3:
-        return b[0], b[1], b[2]
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = d1 / (d1 - d3)
-        return a[0] + v * abx, a[1] + v * aby, a[2] + v * abz
-    cpx, cpy, cpz = px - c[0], py - c[1], pz - c[2]
-    d5 = abx * cpx + aby * cpy + abz * cpz
-    d6 = acx * cpx + acy * cpy + acz * cpz
-    if d6 >= 0.0 and d5 <= d6:
-        return c[0], c[1], c[2]
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = d2 / (d2 - d6)
-        return a[0] + w * acx, a[1] + w * acy, a[2] + w * acz
-    va = d3 * d6 - d5 * d4
-    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        return b[0] + w * (c[0] - b[0]), b[1] + w * (c[1] - b[1]), b[2] + w * (c[2] - b[2])
-    den = 1.0 / (va + vb + vc)
-    v = vb * den
-    w = vc * den
-    return a[0] + abx * v + acx * w, a[1] + aby * v + acy * w, a[2] + abz * v + acz * w
 
 
 @nb.njit(cache=True)

@@ -106,8 +106,8 @@ def body_samples(shapes: Shapes, body: int, spacing: float,
     mine = np.flatnonzero(shapes.body == body)
     if mine.size == 0:
         raise ValueError(f"body {body} has no level-set primitive")
-    parts = [surface_samples(int(shapes.kind[k]), shapes.half[k], shapes.offset[k], shapes.rot[k], spacing, dim)
-             for k in mine]
+    parts = [surface_samples(int(shapes.kind[k]), shapes.half[k], shapes.offset[k], shapes.rot[k], spacing, dim,
+                             shapes.triangles[k]) for k in mine]
     if mine.size == 1:
         x, n, w = parts[0]
         return x, n, w, (chain_conductance(w) if dim == 2 else radius_conductance(x, spacing))
@@ -115,8 +115,7 @@ def body_samples(shapes: Shapes, body: int, spacing: float,
     kept = []
     for k, (x, n, w) in zip(mine, parts):
         others = mine[mine != k]
-        sub = Shapes(shapes.kind[others], shapes.body[others], shapes.offset[others], shapes.rot[others],
-                     shapes.half[others])
+        sub = shapes.take(others)
 
         def distance(points, sub=sub):
             return signed_distance_reference(points, sub, frame_pos, frame_quat, np.inf)[0]
@@ -182,7 +181,7 @@ def crease_distance(shapes: Shapes, body: int, x: np.ndarray) -> np.ndarray:
     frame_pos, frame_quat = np.zeros((body + 1, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (body + 1, 1))
     out = np.full(len(x), np.inf)
     for k in mine:
-        sub = Shapes(shapes.kind[[k]], shapes.body[[k]], shapes.offset[[k]], shapes.rot[[k]], shapes.half[[k]])
+        sub = shapes.take([k])
         d, _ = signed_distance_reference(x, sub, frame_pos, frame_quat, np.inf)
         on_k = np.abs(d) <= 1e-9 * max(1.0, float(np.abs(x).max(initial=1.0)))
         out = np.where(on_k, out, np.minimum(out, np.abs(d)))

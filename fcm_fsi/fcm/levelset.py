@@ -1,7 +1,9 @@
 """Signed distance (level set) of the structure on mesh nodes (SPEC §1, issue #5 item 1).
 
-The structure is a union of primitives — spheres, boxes and finite capped cylinders —
-each either static (world frame) or carried by a rigid DEM body. Its level set is
+The structure is a union of primitives (fcm/shapes.py) — spheres, boxes, finite capped
+cylinders and closed triangle surfaces from CAD files (kind MESH: their exact signed distance
+sampled on a grid at set-up, interpolated trilinearly here, :func:`_grid_distance`) — each
+either static (world frame) or carried by a rigid DEM body. Its level set is
 
     φ(x) = min_i d_i(x),   clipped to [−cutoff, +cutoff],
 
@@ -37,124 +39,23 @@ in a 1 m cube against 1000 boxes of edge 2–6 cm on 1000 randomly posed bodies,
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numba
 import numpy as np
 
 from ..geometry import rotate
-
-SPHERE, BOX, CYLINDER = 0, 1, 2
-NO_SHAPE = -2            # owner of points with no primitive within the cutoff
-STATIC = -1              # body index of a static (world-frame) primitive
-WALL = -3                # the walls, as one owner of the gap-fill search (only in fill_other)
-
-
-# --------------------------------------------------------------------------- shapes
-
-@dataclass(frozen=True)
-class Shapes:
-    """Primitives in body frames. Arrays of length nshape (SI units).
-
-    kind    int64           0 sphere, 1 box, 2 cylinder (finite, capped; axis = shape-frame z)
-    body    int64           index of the body that carries the shape; −1 = static (world frame)
-    offset  (nshape, 3)     shape centre in the body frame [m]
-    rot     (nshape, 3, 3)  shape frame → body frame rotation
-    half    (nshape, 3)     box half extents; sphere (r, 0, 0); cylinder (r, half_length, 0) [m]
-
-    Build them with :meth:`sphere`, :meth:`box`, :meth:`cylinder` and join with
-    :meth:`concat`. A DEM box block of edge lengths (a, b, c), centred at its centre of mass
-    in its principal frame, is ``Shapes.box((0, 0, 0), (a, b, c), body=i)``.
-    """
-
-    kind: np.ndarray
-    body: np.ndarray
-    offset: np.ndarray
-    rot: np.ndarray
-    half: np.ndarray
-
-    def __post_init__(self):
-        n = len(self.kind)
-        arrays = {"kind": (np.asarray(self.kind, np.int64), (n,)),
-                  "body": (np.asarray(self.body, np.int64), (n,)),
-                  "offset": (np.asarray(self.offset, np.float64).reshape(-1, 3), (n, 3)),
-                  "rot": (np.asarray(self.rot, np.float64).reshape(-1, 3, 3), (n, 3, 3)),
-                  "half": (np.asarray(self.half, np.float64).reshape(-1, 3), (n, 3))}
-        for name, (a, shape) in arrays.items():
-            if a.shape != shape:
-                raise ValueError(f"Shapes.{name}: shape {a.shape}, expected {shape}")
-            object.__setattr__(self, name, np.ascontiguousarray(a))
-        _check_shapes(self)
-
-    def __len__(self) -> int:
-        return len(self.kind)
-
-    @classmethod
-    def sphere(cls, centre, r: float, body: int = STATIC) -> Shapes:
-        """Sphere of radius ``r`` [m] centred at ``centre`` [m] (body frame, or world if static)."""
-        return cls._one(SPHERE, body, centre, np.eye(3), (r, 0.0, 0.0))
-
-    @classmethod
-    def box(cls, centre, size, rot=None, body: int = STATIC) -> Shapes:
-        """Box of edge lengths ``size`` = (a, b, c) [m] along the columns of ``rot``
-        (shape → body frame, identity by default), centred at ``centre`` [m]."""
-        return cls._one(BOX, body, centre, np.eye(3) if rot is None else rot, 0.5 * np.asarray(size, float))
-
-    @classmethod
-    def cylinder(cls, centre, r: float, length: float, axis=(0.0, 0.0, 1.0), body: int = STATIC) -> Shapes:
-        """Capped cylinder of radius ``r`` and length ``length`` [m] along ``axis``, centred
-        at ``centre`` [m]. In 2D (points at z = 0) the default axis gives a disc of radius r."""
-        return cls._one(CYLINDER, body, centre, _frame_with_z_along(axis), (r, 0.5 * length, 0.0))
-
-    @classmethod
-    def concat(cls, parts: list[Shapes]) -> Shapes:
-        """All primitives of ``parts``, in order."""
-        if not parts:
-            return cls(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)),
-                       np.zeros((0, 3, 3)), np.zeros((0, 3)))
-        return cls(*(np.concatenate([getattr(p, f) for p in parts])
-                     for f in ("kind", "body", "offset", "rot", "half")))
-
-    @classmethod
-    def _one(cls, kind, body, centre, rot, half) -> Shapes:
-        return cls(np.array([kind]), np.array([body]), np.reshape(centre, (1, 3)),
-                   np.reshape(rot, (1, 3, 3)), np.reshape(half, (1, 3)))
-
-
-def _check_shapes(s: Shapes) -> None:
-    """Reject unknown kinds, body < −1, non-positive sizes and improper rotations."""
-    bad = np.flatnonzero((s.kind < SPHERE) | (s.kind > CYLINDER))
-    if bad.size:
-        raise ValueError(f"Shapes.kind[{bad[0]}] = {s.kind[bad[0]]}: allowed 0 sphere, 1 box, 2 cylinder")
-    bad = np.flatnonzero(s.body < STATIC)
-    if bad.size:
-        raise ValueError(f"Shapes.body[{bad[0]}] = {s.body[bad[0]]}: allowed −1 (static) or a body index ≥ 0")
-    used = np.array([[True, False, False], [True, True, True], [True, True, False]])[s.kind]
-    bad = np.flatnonzero(np.any(used & ~(s.half > 0), axis=1))
-    if bad.size:
-        raise ValueError(f"Shapes.half[{bad[0]}] = {s.half[bad[0]]}: sizes of kind {s.kind[bad[0]]} must be > 0")
-    err = np.abs(np.einsum("sji,sjk->sik", s.rot, s.rot) - np.eye(3)).max(axis=(1, 2), initial=0.0)
-    bad = np.flatnonzero((err > 1e-9) | (np.linalg.det(s.rot) < 0))
-    if bad.size:
-        raise ValueError(f"Shapes.rot[{bad[0]}] is not a proper rotation (RᵀR − I up to {err[bad[0]]:.2e})")
-
-
-def _frame_with_z_along(axis) -> np.ndarray:
-    """A rotation whose third column is the unit vector along ``axis``."""
-    a = np.asarray(axis, np.float64)
-    a = a / np.linalg.norm(a)
-    helper = np.eye(3)[np.argmin(np.abs(a))]
-    e1 = np.cross(helper, a)
-    e1 /= np.linalg.norm(e1)
-    return np.column_stack([e1, np.cross(a, e1), a])
-
-
-def bounding_radius(shapes: Shapes) -> np.ndarray:
-    """Radius [m] of the sphere about each primitive's centre that contains it."""
-    h = shapes.half
-    return np.select([shapes.kind == SPHERE, shapes.kind == BOX],
-                     [h[:, 0], np.linalg.norm(h, axis=1)], np.hypot(h[:, 0], h[:, 1]))
-
+from .shapes import (  # noqa: F401  # noqa: F401 (BOX … grid_margin: re-exported)
+    BOX,
+    CYLINDER,
+    KIND_NAMES,
+    MESH,
+    NO_SHAPE,
+    SPHERE,
+    STATIC,
+    WALL,
+    Shapes,
+    bounding_radius,
+    grid_margin,
+)
 
 # --------------------------------------------------------------------------- kernels
 
@@ -251,12 +152,38 @@ def _local_distance(kind, hx, hy, hz, px, py, pz):
 
 
 @numba.njit(cache=True, inline="always")
-def _primitive_distance(kind, half, R, s, dx, dy, dz):
+def _grid_distance(values, start, nx, ny, nz, hx, hy, hz, px, py, pz):
+    """A mesh's signed distance [m] at the shape-frame point p: trilinear interpolation of its
+    grid (nodes nx × ny × nz over the box |p_k| ≤ h_k, values from ``start``) at p clamped to
+    the box, plus the distance from p to the box. Every boundary node lies at least the grid's
+    margin outside the surface, so outside the box the value is ≥ that margin (the level set
+    is then clipped to +cutoff), and it is continuous across the box's faces."""
+    cx, cy, cz = min(max(px, -hx), hx), min(max(py, -hy), hy), min(max(pz, -hz), hz)
+    outside = np.sqrt((px - cx) ** 2 + (py - cy) ** 2 + (pz - cz) ** 2)
+    tx, ty, tz = (cx + hx) / (2.0 * hx) * (nx - 1), (cy + hy) / (2.0 * hy) * (ny - 1), (cz + hz) / (2.0 * hz) * (nz - 1)
+    i, j, k = min(int(tx), nx - 2), min(int(ty), ny - 2), min(int(tz), nz - 2)
+    fx, fy, fz = tx - i, ty - j, tz - k
+    value = 0.0
+    for a in range(2):
+        wa = fx if a else 1.0 - fx
+        for b in range(2):
+            wb = fy if b else 1.0 - fy
+            base = start + ((i + a) * ny + (j + b)) * nz + k
+            value += wa * wb * ((1.0 - fz) * values[base] + fz * values[base + 1])
+    return value + outside
+
+
+@numba.njit(cache=True, inline="always")
+def _primitive_distance(kind, half, grid, values, R, s, dx, dy, dz):
     """Signed distance [m] to primitive ``s`` of the point at (dx, dy, dz) from its world
-    centre: the shape-frame point Rᵀ (x − c), then :func:`_local_distance`."""
+    centre: the shape-frame point Rᵀ (x − c), then :func:`_local_distance` or, for a mesh,
+    :func:`_grid_distance`."""
     px = R[s, 0, 0] * dx + R[s, 1, 0] * dy + R[s, 2, 0] * dz
     py = R[s, 0, 1] * dx + R[s, 1, 1] * dy + R[s, 2, 1] * dz
     pz = R[s, 0, 2] * dx + R[s, 1, 2] * dy + R[s, 2, 2] * dz
+    if kind[s] == MESH:
+        return _grid_distance(values, grid[s, 0], grid[s, 1], grid[s, 2], grid[s, 3],
+                              half[s, 0], half[s, 1], half[s, 2], px, py, pz)
     return _local_distance(kind[s], half[s, 0], half[s, 1], half[s, 2], px, py, pz)
 
 
@@ -273,7 +200,7 @@ def _point_cell(x, lo, dims, cell):
 
 
 @numba.njit(cache=True, parallel=True)
-def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, start, items,
+def _evaluate(x, kind, body, half, grid, values, radius, centre, R, cutoff, lo, dims, cell, start, items,
               planes, gap, phi, owner, fill_other, fill_weight, second, margin):
     """Clipped union distance φ and owner body at every point; returns the number of
     (point, primitive) candidates read from the bins (the search cost). ``second`` and
@@ -313,7 +240,7 @@ def _evaluate(x, kind, body, half, radius, centre, R, cutoff, lo, dims, cell, st
                 reach = radius[s] + cutoff
                 if dx * dx + dy * dy + dz * dz >= reach * reach:
                     continue
-                d = _primitive_distance(kind, half, R, s, dx, dy, dz)
+                d = _primitive_distance(kind, half, grid, values, R, s, dx, dy, dz)
                 if d < best:
                     best = d
                     arg = s
@@ -398,6 +325,11 @@ class StructureLevelSet:
         self.walls = _unit_planes(walls)
         if len(shapes) and shapes.body.max() >= nbodies:
             raise ValueError(f"Shapes.body refers to body {shapes.body.max()}, but nbodies = {nbodies}")
+        short = np.flatnonzero(grid_margin(shapes) < cutoff)
+        if short.size:
+            raise ValueError(f"shape {short[0]} (a surface mesh): its distance grid reaches "
+                             f"{grid_margin(shapes)[short[0]]:.4g} m beyond the surface, less than the cutoff "
+                             f"{cutoff:.4g} m (grow the grid's margin)")
         self.shapes = shapes
         self.nbodies = int(nbodies)
         self.cutoff = float(cutoff)
@@ -441,7 +373,7 @@ class StructureLevelSet:
         centre, R = _world_frames(s.body, s.offset, s.rot, body_pos, body_quat)
         lo, dims, cell = _grid(centre, self._reach, self._cell, self._max_cells)
         start, items = _bin_shapes(centre, self._reach, lo, dims, cell)
-        self.pair_tests = _evaluate(x, s.kind, s.body, s.half, self._radius, centre, R, self.cutoff,
+        self.pair_tests = _evaluate(x, s.kind, s.body, s.half, s.grid, s.values, self._radius, centre, R, self.cutoff,
                                     lo, dims, cell, start, items, self.walls, self.gap, phi, owner,
                                     self.fill_other, self.fill_weight, self.second_owner, self.owner_margin)
         self.bin_entries = items.shape[0]
@@ -456,21 +388,23 @@ class FaceDistance:
 
     def __init__(self, shapes: Shapes, body_pos: np.ndarray, body_quat: np.ndarray):
         nb = len(np.asarray(body_pos).reshape(-1, 3))
-        self.kind, self.half = shapes.kind, shapes.half
+        self.kind, self.half, self.grid, self.values = shapes.kind, shapes.half, shapes.grid, shapes.values
         self.centre, self.R = _world_frames(shapes.body, shapes.offset, shapes.rot,
                                             np.ascontiguousarray(body_pos, np.float64).reshape(nb, 3),
                                             np.ascontiguousarray(body_quat, np.float64).reshape(nb, 4))
 
     def __call__(self, x: float, y: float, z: float) -> float:
-        return _face_distance(float(x), float(y), float(z), self.kind, self.half, self.centre, self.R)
+        return _face_distance(float(x), float(y), float(z), self.kind, self.half, self.grid, self.values,
+                              self.centre, self.R)
 
 
 @numba.njit(cache=True)
-def _face_distance(x, y, z, kind, half, centre, R):
+def _face_distance(x, y, z, kind, half, grid, values, centre, R):
     """|min over primitives of the signed distance| at (x, y, z); inf without primitives."""
     best = np.inf
     for s in range(kind.shape[0]):
-        best = min(best, _primitive_distance(kind, half, R, s, x - centre[s, 0], y - centre[s, 1], z - centre[s, 2]))
+        best = min(best, _primitive_distance(kind, half, grid, values, R, s,
+                                             x - centre[s, 0], y - centre[s, 1], z - centre[s, 2]))
     return abs(best)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import quat_to_matrix_np
-from .levelset import BOX, NO_SHAPE, SPHERE, WALL, Shapes, _unit_planes
+from .levelset import BOX, MESH, NO_SHAPE, SPHERE, WALL, Shapes, _unit_planes
 
 
 def _box_distance_reference(p: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -15,6 +15,23 @@ def _box_distance_reference(p: np.ndarray, half: np.ndarray) -> np.ndarray:
     gap = np.linalg.norm(p - np.clip(p, -half, half), axis=-1)
     depth = np.min(half - np.abs(p), axis=-1)
     return np.where(gap > 0, gap, -depth)
+
+
+def grid_distance_reference(p: np.ndarray, half: np.ndarray, grid: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """A mesh primitive's distance [m] at shape-frame points p (n, 3): trilinear interpolation
+    of its grid at p clamped to the grid box, plus the distance from p to the box (as
+    :func:`~fcm_fsi.fcm.levelset._grid_distance`)."""
+    start, dims = grid[0], grid[1:]
+    table = values[start:start + np.prod(dims)].reshape(dims)
+    c = np.clip(p, -half, half)
+    t = (c + half) / (2.0 * half) * (dims - 1)
+    i = np.minimum(t.astype(np.int64), dims - 2)
+    f = t - i
+    value = np.zeros(len(p))
+    for corner in np.ndindex(2, 2, 2):
+        w = np.prod(np.where(np.array(corner), f, 1.0 - f), axis=1)
+        value += w * table[i[:, 0] + corner[0], i[:, 1] + corner[1], i[:, 2] + corner[2]]
+    return value + np.linalg.norm(p - c, axis=1)
 
 
 def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: float, gap: float = 0.0,
@@ -44,6 +61,8 @@ def signed_distance_reference(x, shapes: Shapes, body_pos, body_quat, cutoff: fl
         [_box_distance_reference(np.linalg.norm(p, axis=-1, keepdims=True), h[:, :1]),
          _box_distance_reference(p, h)],
         _box_distance_reference(np.stack([np.hypot(p[..., 0], p[..., 1]), p[..., 2]], axis=-1), h[:, :2]))
+    for s in np.flatnonzero(shapes.kind == MESH):
+        d[:, s] = grid_distance_reference(p[:, s], shapes.half[s], shapes.grid[s], shapes.values)
     arg = np.argmin(d, axis=1)
     dmin = d[np.arange(len(x)), arg]
     near = dmin < cutoff

@@ -1,11 +1,11 @@
 """Quadrature samples on the blocks' surfaces: points, outward normals and the length (2D) or
-area (3D) each one carries, for boxes, spheres and cylinders — the samples of the
-hidden-surface closure (fcm/hidden.py)."""
+area (3D) each one carries, for boxes, spheres, cylinders and triangle surfaces — the samples
+of the hidden-surface closure (fcm/hidden.py)."""
 from __future__ import annotations
 
 import numpy as np
 
-from .levelset import BOX, CYLINDER, SPHERE
+from .shapes import BOX, CYLINDER, MESH, SPHERE
 
 
 def perimeter_samples(kind: int, half: np.ndarray, offset: np.ndarray, rot: np.ndarray,
@@ -124,10 +124,41 @@ def cylinder_surface_samples(radius: float, half_length: float, offset: np.ndarr
     return offset + local @ rot.T, normals @ rot.T, np.concatenate(area)
 
 
+def triangle_surface_samples(corners: np.ndarray, offset: np.ndarray, rot: np.ndarray,
+                             spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A triangle surface (corners (nt, 3, 3) [m], outward, counter-clockwise), each triangle
+    cut into m² similar ones, m the fewest that make their edges ≤ ``spacing``: the small
+    triangles' centroids (n, 3) [m], outward unit normals, areas [m²] (summing to the
+    surface's area exactly), in the frame where the surface sits at ``offset`` rotated by ``rot``."""
+    pts, nrm, area = [], [], []
+    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    m_of = np.maximum(1, np.ceil(edges / spacing).astype(np.int64))
+    for m in np.unique(m_of):
+        c = corners[m_of == m]
+        a, e1, e2 = c[:, 0], (c[:, 1] - c[:, 0]) / m, (c[:, 2] - c[:, 0]) / m
+        i, j = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+        up = (i + j) < m                                  # (i, j) upright, (i+1, j+1) inverted cells
+        down = (i + j) < m - 1
+        u = np.concatenate([i[up] + 1 / 3, i[down] + 2 / 3])
+        v = np.concatenate([j[up] + 1 / 3, j[down] + 2 / 3])
+        pts.append((a[:, None] + u[None, :, None] * e1[:, None] + v[None, :, None] * e2[:, None]).reshape(-1, 3))
+        cross = np.cross(e1, e2)
+        norm = np.linalg.norm(cross, axis=1)
+        nrm.append(np.repeat(cross / norm[:, None], len(u), axis=0))
+        area.append(np.repeat(0.5 * norm, len(u)))
+    local, normals = np.concatenate(pts), np.concatenate(nrm)
+    return offset + local @ rot.T, normals @ rot.T, np.concatenate(area)
+
+
 def surface_samples(kind: int, half: np.ndarray, offset: np.ndarray, rot: np.ndarray, spacing: float,
-                    dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    dim: int, triangles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One primitive's surface in its body frame: points (n, 3) [m], outward normals (n, 3)
-    and lengths [m] (``dim`` 2: the section z = 0, :func:`perimeter_samples`) or areas [m²]."""
+    and lengths [m] (``dim`` 2: the section z = 0, :func:`perimeter_samples`) or areas [m²].
+    A mesh primitive needs its ``triangles`` (shape frame) and a 3D fluid."""
+    if kind == MESH:
+        if dim != 3 or triangles is None:
+            raise ValueError("a surface mesh is sampled in 3D only, from its triangles")
+        return triangle_surface_samples(triangles, offset, rot, spacing)
     if dim == 2:
         x, n, ds = perimeter_samples(kind, half, offset, rot, spacing)
         return np.column_stack([x, np.zeros(len(x))]), np.column_stack([n, np.zeros(len(n))]), ds

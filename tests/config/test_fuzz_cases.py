@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import re
+import shutil
 from pathlib import Path
 
 import pytest
@@ -111,6 +112,7 @@ def validate(path: Path, capsys) -> tuple[int, str]:
 @pytest.mark.parametrize("case", CASES, ids=[c.stem for c in CASES])
 def test_mutants_are_refused_with_one_line_naming_the_key(case, tmp_path, capsys):
     target = tmp_path / case.name
+    shutil.copytree(ROOT / "cases" / "geometry", tmp_path / "geometry")     # the CAD files the cases read
     refused = 0
     failures = []
     for label, path, text in mutants(case):

@@ -281,6 +281,8 @@ def test_no_shapes_and_invalid_input():
     np.testing.assert_array_equal(phi, 0.1)
     np.testing.assert_array_equal(owner, -2)
     with pytest.raises(ValueError, match="kind"):
+        Shapes(np.array([4]), np.array([-1]), np.zeros((1, 3)), np.eye(3)[None], np.ones((1, 3)))
+    with pytest.raises(ValueError, match="grid"):          # a mesh without its distance grid
         Shapes(np.array([3]), np.array([-1]), np.zeros((1, 3)), np.eye(3)[None], np.ones((1, 3)))
     with pytest.raises(ValueError, match="rot"):
         Shapes.box((0, 0, 0), (1, 1, 1), rot=np.diag([1.0, 1.0, -1.0]))
