@@ -43,6 +43,16 @@ ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("coupling", "added_mass_model", "volume"),
     ("dem.structure", "foundation", 0.0),
     ("fluid", "mass_consistent_convection", False),
+    ("dem.blocks[]", "file", ""),
+    ("dem.blocks[]", "scale", 1.0),
+    ("dem.blocks[]", "fill", "clump"),
+    ("dem.blocks[]", "sdf_spacing", None),
+    ("dem.blocks[]", "sdf_margin", None),
+    ("dem.generators[].block", "file", ""),
+    ("dem.generators[].block", "scale", 1.0),
+    ("dem.generators[].block", "fill", "clump"),
+    ("dem.generators[].block", "sdf_spacing", None),
+    ("dem.generators[].block", "sdf_margin", None),
 )
 
 
