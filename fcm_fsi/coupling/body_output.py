@@ -101,7 +101,8 @@ class BodyOutput:
         ``blocks.pvd``."""
         if self.blocks_dir is None or self.rank != 0:
             return
-        from ..dem.output import write_pvd, write_vtp
+        from ..dem.output import write_vtp
+        from ..io.vtp import write_pvd
         damage = self.bonds.block_damage(self.nb) if self.bonds is not None else np.zeros(self.nb)
         name = f"blocks_{len(self.blocks_pvd):05d}.vtp"
         write_vtp(self.blocks_dir / name, state, {"damage": damage[state.sph_block]})
@@ -112,7 +113,7 @@ class BodyOutput:
         """Continue the files of the run a checkpoint at ``time`` [s] came from (after the DEM
         state was restored: bonds broken before it are not new)."""
         if self.blocks_dir is not None:
-            from ..dem.output import read_pvd
+            from ..io.vtp import read_pvd
             self.blocks_pvd = read_pvd(self.blocks_dir / "blocks.pvd", time)
         for csv in (self.bodies_csv, self.breaks_csv, self.members_csv):
             if csv is not None:

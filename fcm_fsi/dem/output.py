@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.vtp import _array, read_pvd, write_points_vtp, write_pvd
+from ..io.vtp import write_points_vtp
 from .state import DEMState
 
-__all__ = ["_array", "read_pvd", "write_pvd", "write_vtp"]
+__all__ = ["write_vtp"]
 
 
 def write_vtp(path: Path, state: DEMState, extra: dict[str, np.ndarray] | None = None) -> None:

@@ -24,12 +24,13 @@ from ..config.case import Case
 from ..config.loader import ConfigError
 from ..dem.ledger import COLUMNS
 from ..dem.model import build_system
-from ..dem.output import write_pvd, write_vtp
+from ..dem.output import write_vtp
 from ..dem.state import kinetic_energy
 from ..dem.system import substep_count
 from ..io.csv import TimeSeriesCSV
 from ..io.logging import get_logger
 from ..io.timing import StageTimer
+from ..io.vtp import write_pvd
 from .loop import SimulationDiverged
 
 log = get_logger("dem")

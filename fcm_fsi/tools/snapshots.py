@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dem.output import read_pvd
+from ..io.vtp import read_pvd
 
 #: the phase-field value drawn as the free surface
 SURFACE = 0.5

@@ -359,7 +359,7 @@ def test_blocks_are_written_for_paraview_and_the_collection_continues_after_a_re
     """With field output on, every output time also writes the spheres (blocks_NNNNN.vtp,
     with a per-sphere ``damage``) listed in blocks.pvd; a restart keeps the entries up to its
     checkpoint and appends after them."""
-    from fcm_fsi.dem.output import read_pvd
+    from fcm_fsi.io.vtp import read_pvd
     data = coarse_case(0.012)
     data["run"].update({"output_every": 2, "checkpoint_every": 100})
     data["output"]["xdmf"] = True

@@ -47,7 +47,7 @@ def test_render_writes_front_and_back_views(tmp_path):
     """A folder in the layout the runs write (fields.h5 of dolfinx's XDMFFile, blocks.pvd of
     the coupled model) gives one PNG per view at the nearest stored time; a 2D run is refused
     with a message, not a traceback."""
-    from fcm_fsi.dem.output import write_pvd
+    from fcm_fsi.io.vtp import write_pvd
     x, tets = cube_tets()
     with h5py.File(tmp_path / "fields.h5", "w") as f:
         f["Mesh/mesh/geometry"] = x
@@ -71,7 +71,7 @@ def test_render_writes_front_and_back_views(tmp_path):
 
 def _vtp(points, damage) -> str:
     """A minimal PolyData file of the coupled model's layout (points and a damage array)."""
-    from fcm_fsi.dem.output import _array
+    from fcm_fsi.io.vtp import _array
     return ('<?xml version="1.0"?><VTKFile type="PolyData"><PolyData><Piece><PointData>'
             + _array("damage", np.asarray(damage, np.float64), 1) + "</PointData><Points>"
             + _array("Points", np.asarray(points, np.float64), 3) + "</Points></Piece></PolyData></VTKFile>")
