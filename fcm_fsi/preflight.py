@@ -487,14 +487,11 @@ def _corners(lower, upper) -> list[tuple[float, ...]]:
 
 def _block_key(case: Case, b: int) -> str:
     """The key that places block ``b`` of the DEM state (blocks, generators, then the structure)."""
-    dem = case.dem
-    if b < len(dem.blocks):
-        return f"dem.blocks[{b}].position"
-    b -= len(dem.blocks)
-    for i, g in enumerate(dem.generators):
-        if b < g.count:
-            return f"dem.generators[{i}].region_min"
-        b -= g.count
+    from .dem.model import described_blocks
+    for key, _, count in described_blocks(case.dem):
+        if b < count:
+            return f"{key}.position" if key.startswith("dem.blocks") else key.replace(".block", ".region_min")
+        b -= count
     return "dem.structure.origin"
 
 

@@ -49,8 +49,15 @@ class BlockConfig:
     file: str = param("", doc="closed surface file of shape mesh: STL (ASCII or binary), OBJ, gmsh .msh or another "
                               "format meshio reads (relative to the case file)")
     scale: float = param(1.0, doc="factor from the file's coordinates to metres (shape mesh)", gt=0)
-    fill: Literal["clump"] = param("clump", doc="shape mesh: clump: one rigid block, its contact spheres on a lattice "
-                                                "in the solid's skin")
+    fill: Literal["clump", "bonded_grid"] = param("clump", doc="shape mesh: clump: one rigid block, its contact "
+                                                               "spheres on a lattice in the solid's skin; "
+                                                               "bonded_grid: the solid cut by a grid of cells of "
+                                                               "grid_size into blocks (each a clump of its skin's "
+                                                               "spheres) bonded by dem.cohesive on the faces they "
+                                                               "share")
+    grid_size: float | None = param(None, unit="m", doc="fill bonded_grid: edge of the grid's cubic cells, from the "
+                                                        "lower corner of the solid's bounding box (at least "
+                                                        "2·radius)", gt=0)
     sdf_spacing: float | None = param(None, unit="m", doc="shape mesh: node spacing of the signed-distance grid the "
                                                           "fluid sees (default radius/2)", gt=0)
     sdf_margin: float | None = param(None, unit="m", doc="shape mesh: how far that grid reaches beyond the surface; "
@@ -81,6 +88,14 @@ class BlockConfig:
             raise ConfigError(f"key 'dem.blocks[].size' = {self.size} is thinner than 2·radius = {2 * self.radius}")
         if sum(a * a for a in self.axis) == 0:
             raise ConfigError("key 'dem.blocks[].axis' must not be the zero vector")
+        if self.fill == "bonded_grid" and (self.shape != "mesh" or self.grid_size is None):
+            raise ConfigError(f"key 'dem.blocks[].fill' = 'bonded_grid' needs shape 'mesh' and a grid_size; got shape "
+                              f"{self.shape!r}, grid_size {self.grid_size}")
+        if self.grid_size is not None and self.fill != "bonded_grid":
+            raise ConfigError("key 'dem.blocks[].grid_size' is used only with fill 'bonded_grid'")
+        if self.grid_size is not None and self.radius is not None and self.grid_size < 2 * self.radius:
+            raise ConfigError(f"key 'dem.blocks[].grid_size' = {self.grid_size:g} m is below 2·radius = "
+                              f"{2 * self.radius:g} m: no contact sphere fits in a cell")
         if self.bonded and (self.shape != "box" or self.angle % 360.0 != 0.0):
             raise ConfigError(f"key 'dem.blocks[].bonded' needs an unrotated box (shape 'box', angle 0); "
                               f"got shape {self.shape!r}, angle {self.angle}")
@@ -101,6 +116,9 @@ class GeneratorConfig:
     def __post_init__(self) -> None:
         if any(a >= b for a, b in zip(self.region_min, self.region_max)):
             raise ConfigError(f"key 'dem.generators[].region_min' {self.region_min} must be below region_max {self.region_max}")
+        if self.block.fill == "bonded_grid":
+            raise ConfigError("key 'dem.generators[].block.fill' = 'bonded_grid': generated blocks are single "
+                              "blocks; put a bonded structure in dem.blocks")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -176,7 +194,7 @@ class DEMConfig:
             used.append(("dem.structure.material", self.structure.material))
             if self.cohesive is None:
                 raise ConfigError("key 'dem.cohesive' is required when dem.structure is given")
-        bonded = [i for i, b in enumerate(self.blocks) if b.bonded]
+        bonded = [i for i, b in enumerate(self.blocks) if b.bonded or b.fill == "bonded_grid"]
         if bonded and self.cohesive is None:
             raise ConfigError(f"key 'dem.cohesive' is required when dem.blocks{bonded} are bonded")
         for key, name in used:
@@ -185,8 +203,9 @@ class DEMConfig:
         nblocks = len(self.blocks) + sum(g.count for g in self.generators)
         if nblocks == 0 and self.structure is None:
             raise ConfigError("key 'dem.blocks' / 'dem.generators': the case has no blocks")
+        grids = any(b.fill == "bonded_grid" for b in self.blocks)   # their piece counts need the file
         for i, c in enumerate(self.controls):
-            if c.block >= nblocks:
+            if c.block >= nblocks and not grids:
                 raise ConfigError(f"key 'dem.controls[{i}].block' = {c.block} but there are {nblocks} blocks")
 
     def material_index(self, name: str) -> int:

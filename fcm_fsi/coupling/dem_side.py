@@ -40,8 +40,9 @@ from typing import Literal
 import numpy as np
 
 from ..config.dem import DEMConfig
+from ..dem.grid_fill import piece_grid
 from ..dem.mesh_block import MeshBlock, mesh_block
-from ..dem.model import build_structure, template_of
+from ..dem.model import build_structure, described_blocks, grid_fill_of, template_of
 from ..dem.state import DEMState
 from ..dem.system import DEMSystem, substep_count
 from ..fcm.levelset import BOX, MESH, SPHERE, Shapes
@@ -66,9 +67,11 @@ def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0
     a wall thinner than a cell would otherwise fall between the mesh nodes and leak).
     ``structure``: the built ``dem.structure`` when the caller has it (built here otherwise)."""
     parts, first = [], 0
-    for (b, count), key in zip(_described_blocks(cfg), _block_keys(cfg)):
+    for key, b, count in described_blocks(cfg):
         blocks = np.arange(first, first + count)
-        if b.shape == "mesh":
+        if b.fill == "bonded_grid":
+            parts.extend(_grid_piece_shapes(b, grid_fill_of(cfg, int(key[len("dem.blocks["):-1])), first))
+        elif b.shape == "mesh":
             density = cfg.materials[cfg.material_index(b.material)].density
             parts.extend(_mesh_shape(b, mesh_block(b, density, key), k) for k in blocks)
         elif b.shape == "box":
@@ -165,21 +168,6 @@ def _depth_axes(shapes: Shapes, boxes: np.ndarray, state: DEMState, gdim: int) -
     return np.abs(axes[:, 2, :]) > 0.5
 
 
-def _described_blocks(cfg: DEMConfig):
-    """(BlockConfig, number of blocks) in the state's block order (see ``build_state``):
-    cfg.blocks one by one, then each generator's template ``count`` times."""
-    for b in cfg.blocks:
-        yield b, 1
-    for g in cfg.generators:
-        yield g.block, g.count
-
-
-def _block_keys(cfg: DEMConfig):
-    """The key path of each entry of :func:`_described_blocks` (for errors)."""
-    yield from (f"dem.blocks[{i}]" for i in range(len(cfg.blocks)))
-    yield from (f"dem.generators[{i}].block" for i in range(len(cfg.generators)))
-
-
 def _mesh_shape(b, block: MeshBlock, k: int) -> Shapes:
     """Block ``k`` of shape mesh as the fluid sees it: its surface's signed-distance grid
     (node spacing ``sdf_spacing``, default radius/2; reaching ``sdf_margin`` beyond the
@@ -192,6 +180,25 @@ def _mesh_shape(b, block: MeshBlock, k: int) -> Shapes:
     return Shapes.mesh(grid, block.surface.corners, origin=-to_body @ block.properties.centre, rot=to_body, body=k)
 
 
+def _grid_piece_shapes(b, fill, first: int) -> list[Shapes]:
+    """The pieces of a bonded grid (blocks ``first`` …) as the fluid sees them: each its signed
+    distance max(d_S, d_U) on a grid (dem/grid_fill.py; spacing and margin as a mesh block's), in
+    its body (principal) frame."""
+    spacing = b.sdf_spacing if b.sdf_spacing is not None else 0.5 * b.radius
+    margin = b.sdf_margin if b.sdf_margin is not None else 0.25 * float(np.ptp(fill.surface.vertices, axis=0).max())
+    key = (b.file, b.scale, b.grid_size, float(spacing), float(margin))
+    if key not in _PIECE_GRIDS:
+        _PIECE_GRIDS.clear()
+        whole = _distance_grid(b.file, b.scale, float(spacing), float(margin), fill.surface)
+        _PIECE_GRIDS[key] = [piece_grid(whole, p, fill.origin, fill.size, float(margin)) for p in fill.pieces]
+    out = []
+    for k, (p, grid) in enumerate(zip(fill.pieces, _PIECE_GRIDS[key])):
+        to_body = p.template.R_body.T
+        out.append(Shapes.mesh(grid, p.corners, origin=-to_body @ p.properties.centre, rot=to_body, body=first + k))
+    return out
+
+
+_PIECE_GRIDS: dict = {}
 _GRIDS: dict = {}
 
 

@@ -331,14 +331,17 @@ class CohesiveBonds:
 
     @classmethod
     def from_faces(cls, law: CohesiveLaw, faces: list[BondFace], pos, quat,
-                   points_per_edge: int) -> CohesiveBonds:
-        """Bonds on ``faces`` of blocks at ``pos``/``quat`` (the bonded reference state)."""
+                   points_per_edge: int, points: list | None = None) -> CohesiveBonds:
+        """Bonds on ``faces`` of blocks at ``pos``/``quat`` (the bonded reference state).
+        ``points``: per face, None for the ``points_per_edge``² Gauss points of its rectangle,
+        or its own (points (m, 3) [m], areas (m,) [m²]) (a face the solid covers partly)."""
         R = quat_to_matrix_np(np.asarray(quat, float).reshape(-1, 4))
         pos = np.asarray(pos, float).reshape(-1, 3)
         cols = {k: [] for k in ("bond", "a", "b", "ra", "rb", "na", "area")}
-        for i, f in enumerate(faces):
-            pts, areas = face_points(f.centre, f.axis_u, f.axis_v, f.half_u, f.half_v,
-                                     points_per_edge)
+        given = [None] * len(faces) if points is None else points
+        for i, (f, own) in enumerate(zip(faces, given)):
+            pts, areas = own if own is not None else face_points(f.centre, f.axis_u, f.axis_v, f.half_u,
+                                                                 f.half_v, points_per_edge)
             m = len(areas)
             cols["bond"].append(np.full(m, i))
             cols["a"].append(np.full(m, f.a))
@@ -351,7 +354,8 @@ class CohesiveBonds:
             return cls(law, *(np.zeros((0, 3) if k in ("ra", "rb", "na") else 0)
                               for k in cols), bond_area=np.zeros(0))
         return cls(law, *(np.concatenate(cols[k]) for k in cols),
-                   bond_area=np.array([f.area for f in faces]))
+                   bond_area=np.array([f.area if own is None else float(np.sum(own[1]))
+                                       for f, own in zip(faces, given)]))
 
     def compute(self, pos: np.ndarray, quat: np.ndarray, force: np.ndarray,
                 torque: np.ndarray) -> None:

@@ -21,6 +21,7 @@ import numpy as np
 from ..config.loader import ConfigError
 from ..config.structure import StructureConfig
 from .builder import KINDS, building_boxes
+from .model import described_blocks
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,7 @@ def block_members(case) -> list[str]:
     generators), then :func:`member_names` of the structure."""
     if case.dem is None or case.dem.structure is None:
         raise ConfigError(f"case {case.name!r}: no dem.structure (no building to name)")
-    first = len(case.dem.blocks) + sum(g.count for g in case.dem.generators)
+    first = sum(count for _, _, count in described_blocks(case.dem))
     return [f"block {k}" for k in range(first)] + member_names(case.dem.structure)
 
 

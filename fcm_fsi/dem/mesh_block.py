@@ -72,13 +72,19 @@ def _mesh_block(b: BlockConfig, density: float, key: str) -> MeshBlock:
 def skin_sphere_centres(surface: ClosedSurface, radius: float, spacing: float) -> np.ndarray:
     """Centres (n, 3) [m] of the contact spheres of ``radius`` [m] in the solid's skin: the nodes
     of the lattice of spacing ≤ ``spacing`` (module docstring) at depth d, r ≤ d < r + a."""
-    lo, hi = surface.vertices.min(axis=0) + radius, surface.vertices.max(axis=0) - radius
-    axes = []
-    for a, b in zip(lo, hi):
-        n = int(np.ceil((b - a) / spacing * (1 - 1e-6))) + 1 if b > a else 1     # a float32 file's ties
-        axes.append(np.linspace(a, b, n) if b > a else np.array([0.5 * (a + b)]))
+    axes = lattice_axes(surface.vertices.min(axis=0) + radius, surface.vertices.max(axis=0) - radius, spacing)
     step = max((ax[1] - ax[0]) if len(ax) > 1 else 0.0 for ax in axes)
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     depth = -signed_distance(np.ascontiguousarray(nodes), np.ascontiguousarray(surface.corners))
     tol = 1e-9 * float(np.ptp(surface.vertices, axis=0).max())
     return nodes[(depth >= radius - tol) & (depth < radius + max(step, tol))]
+
+
+def lattice_axes(lo, hi, spacing: float) -> list[np.ndarray]:
+    """Per axis, the sphere lattice's coordinates [m]: from ``lo`` to ``hi`` in equal steps
+    ≤ ``spacing`` (one node in the middle where hi ≤ lo)."""
+    axes = []
+    for a, b in zip(lo, hi):
+        n = int(np.ceil((b - a) / spacing * (1 - 1e-6))) + 1 if b > a else 1     # a float32 file's ties
+        axes.append(np.linspace(a, b, n) if b > a else np.array([0.5 * (a + b)]))
+    return axes

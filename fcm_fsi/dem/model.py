@@ -12,8 +12,10 @@ from ..config.loader import ConfigError
 from ..geometry import quat_to_matrix_np
 from ..io.logging import get_logger
 from .bodies import BlockTemplate, axis_angle_quat, box_template, clump_template, matrix_to_quat
+from .cohesive import BondFace, CohesiveBonds, CohesiveLaw
 from .contact import Materials
 from .control import Control, Controls
+from .grid_fill import grid_fill
 from .laws import DEFAULT_LAW, LAWS
 from .mesh_block import mesh_block
 from .restitution import damping_ratio
@@ -22,6 +24,25 @@ from .system import DEMSystem
 from .walls import walls_of
 
 log = get_logger("dem")
+
+
+def described_blocks(cfg: DEMConfig) -> list[tuple[str, BlockConfig, int]]:
+    """(key, block description, number of blocks) in the state's block order (``build_state``):
+    dem.blocks one by one (a bonded grid as its pieces), then each generator's template
+    ``count`` times; the structure's blocks come after these."""
+    out = []
+    for i, b in enumerate(cfg.blocks):
+        count = len(grid_fill_of(cfg, i).pieces) if b.fill == "bonded_grid" else 1
+        out.append((f"dem.blocks[{i}]", b, count))
+    out += [(f"dem.generators[{i}].block", g.block, g.count) for i, g in enumerate(cfg.generators)]
+    return out
+
+
+def grid_fill_of(cfg: DEMConfig, i: int):
+    """The pieces and bonds of ``dem.blocks[i]`` (fill bonded_grid; dem/grid_fill.py)."""
+    b = cfg.blocks[i]
+    return grid_fill(b, cfg.materials[cfg.material_index(b.material)].density, cfg.cohesive.points_per_edge,
+                     f"dem.blocks[{i}]")
 
 
 def template_of(b: BlockConfig, density: float, key: str = "dem.blocks[]") -> BlockTemplate:
@@ -109,7 +130,12 @@ def build_state(cfg: DEMConfig, structure=None) -> DEMState:
 
     for i, b in enumerate(cfg.blocks):
         dens = cfg.materials[cfg.material_index(b.material)].density
-        add(template_of(b, dens, f"dem.blocks[{i}]"), b, b.position, axis_angle_quat(b.axis, math.radians(b.angle)))
+        q_user = axis_angle_quat(b.axis, math.radians(b.angle))
+        if b.fill == "bonded_grid":             # each piece: the file's origin at `position`
+            for piece in grid_fill_of(cfg, i).pieces:
+                add(piece.template, b, b.position, q_user)
+        else:
+            add(template_of(b, dens, f"dem.blocks[{i}]"), b, b.position, q_user)
     for i, g in enumerate(cfg.generators):
         dens = cfg.materials[cfg.material_index(g.block.material)].density
         tmpl = template_of(g.block, dens, f"dem.generators[{i}].block")
@@ -173,15 +199,41 @@ def cohesive_bonds(cfg: DEMConfig, state: DEMState, structure=None):
     """One set of cohesive bonds on the faces of the bonded blocks and of the structure (its
     block indices shifted to the state's: it comes last), in the built, stress-free
     configuration; None when there are none."""
-    from .cohesive import CohesiveBonds, CohesiveLaw
     faces = bonded_block_faces(cfg)
+    points = [None] * len(faces)
     if structure is not None:
         first = state.nb - structure.nb
         faces += [dataclasses.replace(f, a=f.a + first, b=f.b + first) for f in structure.faces]
+        points += [None] * len(structure.faces)
+    for f, p in grid_bond_faces(cfg):
+        faces.append(f)
+        points.append(p)
     if not faces:
         return None
     return CohesiveBonds.from_faces(CohesiveLaw.from_config(cfg.cohesive), faces, state.pos, state.quat,
-                                    cfg.cohesive.points_per_edge)
+                                    cfg.cohesive.points_per_edge, points)
+
+
+def grid_bond_faces(cfg: DEMConfig) -> list:
+    """The bonds between the pieces of the bonded grids of ``dem.blocks``, in the world frame:
+    (BondFace, (points (m, 3) [m], areas (m,) [m²])) with block indices in the state's order."""
+    out, first = [], 0
+    for key, b, count in described_blocks(cfg):
+        if b.fill == "bonded_grid":
+            fill = grid_fill_of(cfg, int(key[len("dem.blocks["):-1]))
+            R = quat_to_matrix_np(axis_angle_quat(b.axis, math.radians(b.angle)))
+            at = np.asarray(b.position, float)
+            for g in fill.bonds:
+                pts = at + g.points @ R.T
+                n = R @ g.normal
+                u = R @ np.roll(np.abs(g.normal), 1)
+                area = float(g.areas.sum())
+                face = BondFace(a=first + g.a, b=first + g.b, centre=tuple(pts.mean(axis=0)), normal=tuple(n),
+                                axis_u=tuple(u), axis_v=tuple(np.cross(n, u)), half_u=0.5 * np.sqrt(area),
+                                half_v=0.5 * np.sqrt(area))
+                out.append((face, (pts, g.areas)))
+        first += count
+    return out
 
 
 def check_time_step(system: DEMSystem, safety: float) -> float:

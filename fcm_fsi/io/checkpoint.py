@@ -48,11 +48,13 @@ ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("dem.blocks[]", "fill", "clump"),
     ("dem.blocks[]", "sdf_spacing", None),
     ("dem.blocks[]", "sdf_margin", None),
+    ("dem.blocks[]", "grid_size", None),
     ("dem.generators[].block", "file", ""),
     ("dem.generators[].block", "scale", 1.0),
     ("dem.generators[].block", "fill", "clump"),
     ("dem.generators[].block", "sdf_spacing", None),
     ("dem.generators[].block", "sdf_margin", None),
+    ("dem.generators[].block", "grid_size", None),
 )
 
 

@@ -13,7 +13,11 @@ clump's overlapping spheres counted once, a stack's inner faces not at all). Pos
 * ``clump``: two spheres of radius 2 cm, centres 2 cm apart, resting on the floor;
 * ``free``: the ``flat`` block held in mid-water, 6 cm above the floor: nothing is hidden
   (reported: the static part of the load comes from the samples of the true surface, the
-  flow's part from the cut surface Γ, so this is the closure's error without a gap).
+  flow's part from the cut surface Γ, so this is the closure's error without a gap);
+* ``cad`` (3D): the ``flat`` block read from an STL file (``shape: mesh``, one rigid block, the
+  fluid seeing its signed-distance grid);
+* ``cad_grid`` (3D): the same file cut on a 2 cm grid into 30 bonded pieces (``fill:
+  bonded_grid``): the faces between them are hidden, the lift is the outer volume's.
 
 Every block is held still by a velocity control (the tilted one would topple), and the load
 is read after four 1 ms steps. 2D: structured triangles of the cell size; 3D: a gmsh box of
@@ -46,9 +50,10 @@ TILT = 20.0                               # [deg]
 SPHERE_R, SPHERE_GAP = 0.02, 0.02         # clump: radius and centre distance [m]
 FREE_LIFT = 0.06                          # the free block's bottom above the floor [m]
 STEPS, DT = 4, 1.0e-3
-POSES = ("flat", "tilted", "stack", "clump", "free")
-LEVELS = {"quick": {2: (0.005, POSES[:4]), 3: (0.007, ("flat", "tilted", "free"))},
+POSES = ("flat", "tilted", "stack", "clump", "free", "cad", "cad_grid")
+LEVELS = {"quick": {2: (0.005, POSES[:4]), 3: (0.007, ("flat", "tilted", "free", "cad_grid"))},
           "full": {2: (0.0025, POSES[:4]), 3: (0.004, POSES)}}
+CAD_GRID = 0.02                           # cad_grid: the cells' edge [m] (5 × 3 × 2 pieces)
 TOL = 0.01                                # Archimedes (issue #44)
 
 
@@ -90,6 +95,10 @@ def blocks(dim: int, pose: str) -> list[dict]:
         return [_box(dim, x, 0.5 * BLOCK[0] * np.sin(a) + 0.5 * h * np.cos(a), h, TILT)]
     if pose == "stack":
         return [_box(dim, x, h / 4, h / 2, bonded=True), _box(dim, x, 3 * h / 4, h / 2, bonded=True)]
+    if pose in ("cad", "cad_grid"):          # the flat block from its file: origin at its centre
+        cad = {"shape": "mesh", "material": "stone", "file": "block.stl", "position": _position(dim, x, h / 2),
+               "radius": 0.004, "sdf_spacing": 0.004, "sdf_margin": 0.09}
+        return [{**cad, "fill": "bonded_grid", "grid_size": CAD_GRID} if pose == "cad_grid" else cad]
     if pose == "clump":
         half = SPHERE_GAP / 2
         return [{"shape": "clump", "material": "stone", "position": _position(dim, x, SPHERE_R),
@@ -126,12 +135,34 @@ def still_water_case(dim: int, pose: str, cell: float, out: Path) -> dict:
         "coupling": {"hidden_pressure": "hydrostatic", **({"depth": BLOCK[2]} if dim == 2 else {})},
         "output": {"directory": str(out), "xdmf": False},
     }
-    if pose == "stack":
+    if pose in ("cad", "cad_grid"):
+        for b in data["dem"]["blocks"]:
+            b["file"] = str(_block_file(out))
+        data["dem"]["controls"] = [{"block": i, "modes": ["velocity"] * 6, "values": [0.0] * 6}
+                                   for i in range(30 if pose == "cad_grid" else 1)]
+    if pose in ("stack", "cad_grid"):
         data["dem"]["cohesive"] = {"sigma_c": 2.0e4, "delta_f": 1.0e-3, "mode": "reversible", "points_per_edge": 2}
     if pose == "free":
         data["dem"]["blocks"][0]["fixed"] = True
         data["dem"]["controls"] = []
     return data
+
+
+def _block_file(out: Path) -> Path:
+    """The ``flat`` block (3D) as a 12-triangle STL centred on its file origin, written once by
+    rank 0 into ``out``."""
+    path = Path(out) / "block.stl"
+    comm = MPI.COMM_WORLD
+    if comm.rank == 0 and not path.exists():
+        import meshio
+        half = 0.5 * np.array([BLOCK[0], BLOCK[2], BLOCK[1]])
+        corner = np.array([[k & 1, (k >> 1) & 1, (k >> 2) & 1] for k in range(8)], float)
+        quads = ((0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5))
+        tri = [(q[0], q[1], q[2]) for q in quads] + [(q[0], q[2], q[3]) for q in quads]
+        path.parent.mkdir(parents=True, exist_ok=True)
+        meshio.write(str(path), meshio.Mesh(-half + 2 * half * corner, [("triangle", np.array(tri))]))
+    comm.Barrier()
+    return path
 
 
 def resting_load(data: dict, comm: MPI.Comm) -> tuple[np.ndarray, int]:
