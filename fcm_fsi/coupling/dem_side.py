@@ -70,7 +70,7 @@ def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0
     for key, b, count in described_blocks(cfg):
         blocks = np.arange(first, first + count)
         if b.fill == "bonded_grid":
-            parts.extend(_grid_piece_shapes(b, grid_fill_of(cfg, int(key[len("dem.blocks["):-1])), first))
+            parts.extend(_grid_piece_shapes(b, grid_fill_of(cfg, key), first))
         elif b.shape == "mesh":
             density = cfg.materials[cfg.material_index(b.material)].density
             parts.extend(_mesh_shape(b, mesh_block(b, density, key), k) for k in blocks)
@@ -144,7 +144,8 @@ def fluid_gyration_ratio(cfg: DEMConfig, state: DEMState, min_thickness: float, 
 def fluid_thickness(cfg: DEMConfig, state: DEMState, min_thickness: float, gdim: int) -> np.ndarray:
     """Per block (nb,): its thinnest extent [m] as the fluid sees it — the shortest edge of a
     box block after the ``min_thickness`` widening (in 2D not the depth along z), the smallest
-    sphere diameter of a sphere or clump block, twice the deepest point's depth of a mesh block.
+    sphere diameter of a sphere or clump block, twice the deepest point's depth of a mesh block
+    (of the whole solid for the pieces of a bonded grid).
     A wall must be about two cells thick to hold a pressure difference (docs/coupling.md, 'Thin
     walls')."""
     shapes = shapes_of_blocks(cfg, state, min_thickness)
@@ -157,7 +158,20 @@ def fluid_thickness(cfg: DEMConfig, state: DEMState, min_thickness: float, gdim:
     extent[boxes] = np.where(_depth_axes(shapes, boxes, state, gdim), np.inf, extent[boxes])
     thin = np.full(state.nb, np.inf)
     np.minimum.at(thin, shapes.body, extent.min(axis=1))
+    first = 0
+    for key, b, count in described_blocks(cfg):     # a bonded grid stands as its whole solid
+        if b.fill == "bonded_grid":
+            thin[first:first + count] = _whole_solid_thickness(b, grid_fill_of(cfg, key))
+        first += count
     return thin
+
+
+def _whole_solid_thickness(b, fill) -> float:
+    """Twice the deepest point's depth [m] of the solid a bonded grid was cut from (its distance
+    grid): while bonded, its pieces hold the water as that solid does."""
+    spacing = b.sdf_spacing if b.sdf_spacing is not None else 0.5 * b.radius
+    margin = b.sdf_margin if b.sdf_margin is not None else 0.25 * float(np.ptp(fill.surface.vertices, axis=0).max())
+    return -2.0 * float(_distance_grid(b.file, b.scale, float(spacing), float(margin), fill.surface).values.min())
 
 
 def _depth_axes(shapes: Shapes, boxes: np.ndarray, state: DEMState, gdim: int) -> np.ndarray:

@@ -293,7 +293,8 @@ def _clip(poly: list, s: list, tol: float) -> list:
 def _cap(corners: np.ndarray, face, spacing: float) -> np.ndarray:
     """The cut face S ∩ ``face`` as triangles (m, 3, 3) facing out of the piece: a lattice of
     squares of side ≤ ``spacing`` over the face, each split in two, kept where S lies just
-    inside and just outside the face at the square's centre."""
+    inside and just outside the face at the square's centre (the whole face as two triangles
+    where every square is kept)."""
     k, plane, sign, corner, g = face
     u, v = (k + 1) % 3, (k + 2) % 3
     m = max(1, int(np.ceil(g / spacing - 1e-9)))
@@ -307,7 +308,10 @@ def _cap(corners: np.ndarray, face, spacing: float) -> np.ndarray:
     probe = 1e-6 * g
     keep = (in_section(corners, k, plane - probe, centre[:, u], centre[:, v])
             & in_section(corners, k, plane + probe, centre[:, u], centre[:, v]))
-    b = base[keep]
+    if keep.all():                                      # the whole face: two triangles
+        b, h = corner[None, :], g
+    else:
+        b = base[keep]
     p00, p10, p11, p01 = b, b + h * eu, b + h * (eu + ev), b + h * ev
     # (e_u, e_v, e_k) is right-handed: counter-clockwise in (u, v) faces +e_k
     tri = np.concatenate([np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)])

@@ -38,8 +38,10 @@ def described_blocks(cfg: DEMConfig) -> list[tuple[str, BlockConfig, int]]:
     return out
 
 
-def grid_fill_of(cfg: DEMConfig, i: int):
-    """The pieces and bonds of ``dem.blocks[i]`` (fill bonded_grid; dem/grid_fill.py)."""
+def grid_fill_of(cfg: DEMConfig, entry: int | str):
+    """The pieces and bonds of ``dem.blocks[i]`` (fill bonded_grid; dem/grid_fill.py); ``entry``
+    the index i or the key of :func:`described_blocks`."""
+    i = entry if isinstance(entry, int) else int(entry[len("dem.blocks["):-1])
     b = cfg.blocks[i]
     return grid_fill(b, cfg.materials[cfg.material_index(b.material)].density, cfg.cohesive.points_per_edge,
                      f"dem.blocks[{i}]")
@@ -220,7 +222,7 @@ def grid_bond_faces(cfg: DEMConfig) -> list:
     out, first = [], 0
     for key, b, count in described_blocks(cfg):
         if b.fill == "bonded_grid":
-            fill = grid_fill_of(cfg, int(key[len("dem.blocks["):-1]))
+            fill = grid_fill_of(cfg, key)
             R = quat_to_matrix_np(axis_angle_quat(b.axis, math.radians(b.angle)))
             at = np.asarray(b.position, float)
             for g in fill.bonds:

@@ -10,7 +10,7 @@ import pytest
 
 from fcm_fsi.config.dem import DEMConfig
 from fcm_fsi.config.loader import ConfigError, build
-from fcm_fsi.coupling.dem_side import shapes_of_blocks
+from fcm_fsi.coupling.dem_side import fluid_thickness, shapes_of_blocks
 from fcm_fsi.dem.builder import assemble
 from fcm_fsi.dem.grid_fill import clip_to_box, in_section, union_distance
 from fcm_fsi.dem.model import build_state, build_system, grid_fill_of
@@ -152,6 +152,14 @@ def test_the_fluid_sees_the_union_of_the_pieces_as_the_solid(sphere_file):
     assert np.all(phi["filled"][phi["whole"] < -tol] < 0)
     assert np.all(phi["filled"][phi["whole"] > gap / 2 + tol] > 0)
     assert np.count_nonzero(phi["whole"] < -tol) > 500
+
+
+def test_bonded_pieces_hold_water_as_their_whole_solid(cube_file):
+    """The thin-wall check (twice the deepest depth) sees the 0.2 m pieces of the 1 × 0.6 × 0.4 m
+    box as the box: 0.4 m for each, not the piece's 0.2 m."""
+    cfg = dem_config([grid_block(cube_file)])
+    st = build_state(cfg)
+    np.testing.assert_allclose(fluid_thickness(cfg, st, 0.0, 3), 0.4, atol=0.02)
 
 
 def test_bonded_cube_stands_on_the_floor(cube_file):
