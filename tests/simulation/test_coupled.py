@@ -153,7 +153,7 @@ def resting_block_case(gap_fill: float | None) -> dict:
     """The mortar block of cases/block_overturn.yaml standing on the floor of a small tank of
     still water 0.1 m deep (32 × 16 cells of 1.25 cm), 40 fluid steps of 1 ms."""
     data = yaml.safe_load((ROOT / "cases" / "block_overturn.yaml").read_text())
-    data["run"].update({"t_end": 0.04, "checkpoint_every": 100, "log_every": 10, "cfl": None})
+    data["run"].update({"t_end": 0.04, "checkpoint_every": 100, "log_every": 10, "cfl": None, "cfl_gas": None})
     data["mesh"].update({"lower": [0.8, 0.0], "upper": [1.2, 0.2], "cells": [32, 16]})
     data["phase_field"]["initial"] = {"shape": "box", "lower": [-1.0, -1.0], "upper": [-0.5, 0.0], "bed_depth": 0.1}
     data["fluid"]["pressure_reference"] = [1.2, 0.2]
@@ -214,7 +214,8 @@ def dropped_block_case(model: str) -> dict:
     tank of still water 0.2 m deep (32 × 24 cells of 1.25 cm), the wall velocity the sub-steps'
     mean, the flow's added mass (``model``: potential or tensor); 0.16 s, the landing at ≈ 0.137 s."""
     data = yaml.safe_load((ROOT / "cases" / "block_overturn.yaml").read_text())
-    data["run"].update({"t_end": 0.16, "checkpoint_every": 1000, "log_every": 40, "output_every": 1000, "cfl": None})
+    data["run"].update({"t_end": 0.16, "checkpoint_every": 1000, "log_every": 40, "output_every": 1000, "cfl": None,
+                        "cfl_gas": None})
     data["mesh"].update({"lower": [0.8, 0.0], "upper": [1.2, 0.3], "cells": [32, 24]})
     data["phase_field"]["initial"] = {"shape": "box", "lower": [-1.0, -1.0], "upper": [-0.5, 0.0], "bed_depth": 0.2}
     data["fluid"]["pressure_reference"] = [1.2, 0.3]
@@ -386,7 +387,8 @@ def sliding_pocket_case(speed: float, drain: bool) -> dict:
     data = yaml.safe_load((ROOT / "cases" / "block_overturn.yaml").read_text())
     dx, dy = 2.0125 / 400, 0.61 / 120
     shift = 160 * dx                       # whole cells: the block sits on the full level's mesh as it did
-    data["run"].update({"t_end": 0.08, "checkpoint_every": 1000, "log_every": 40, "output_every": 1000, "cfl": None})
+    data["run"].update({"t_end": 0.08, "checkpoint_every": 1000, "log_every": 40, "output_every": 1000, "cfl": None,
+                        "cfl_gas": None})
     data["mesh"].update({"lower": [0.0, 0.0], "upper": [120 * dx, 40 * dy], "cells": [120, 40]})
     data["phase_field"]["initial"] = {"shape": "box", "lower": [-1.0, -1.0], "upper": [10.0, 0.148]}
     data["dem"]["blocks"][0].update({"position": [1.0857108 - shift, 0.0350284, 0.0], "axis": [0, 0, 1],
