@@ -17,8 +17,9 @@ class RunConfig:
                               gt=0, le=10)
     cfl_gas: float | None = param(None, doc="with cfl and a phase field: the Courant number allowed at the gas nodes "
                                   "(φ < 0.05); the liquid and the interface keep run.cfl (default: run.cfl everywhere). "
-                                  "Not for blocks that land in contact: the larger steps let the explicit coupling's force "
-                                  "oscillation grow and kick the block in block_overturn (docs/two-phase.md)",
+                                  "With coupling.added_mass_model: volume not for blocks that land in contact: the larger "
+                                  "steps let the explicit coupling's force oscillation grow and kick the block "
+                                  "(docs/two-phase.md)",
                                   gt=0, le=10)
     dt_max: float | None = param(None, unit="s", doc="upper bound on the adapted dt (defaults to dt)", gt=0)
     dt_growth: float | None = param(None, doc="with cfl: the adapted dt grows by at most this factor per step "
