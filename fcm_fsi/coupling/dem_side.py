@@ -169,9 +169,7 @@ def fluid_thickness(cfg: DEMConfig, state: DEMState, min_thickness: float, gdim:
 def _whole_solid_thickness(b, fill) -> float:
     """Twice the deepest point's depth [m] of the solid a bonded grid was cut from (its distance
     grid): while bonded, its pieces hold the water as that solid does."""
-    spacing = b.sdf_spacing if b.sdf_spacing is not None else 0.5 * b.radius
-    margin = b.sdf_margin if b.sdf_margin is not None else 0.25 * float(np.ptp(fill.surface.vertices, axis=0).max())
-    return -2.0 * float(_distance_grid(b.file, b.scale, float(spacing), float(margin), fill.surface).values.min())
+    return -2.0 * float(_solid_grid(b, fill.surface)[0].values.min())
 
 
 def _depth_axes(shapes: Shapes, boxes: np.ndarray, state: DEMState, gdim: int) -> np.ndarray:
@@ -187,9 +185,7 @@ def _mesh_shape(b, block: MeshBlock, k: int) -> Shapes:
     (node spacing ``sdf_spacing``, default radius/2; reaching ``sdf_margin`` beyond the
     surface, default a quarter of its largest extent), in the body (principal) frame: the
     file's point x is at R_bodyᵀ (x − com)."""
-    spacing = b.sdf_spacing if b.sdf_spacing is not None else 0.5 * b.radius
-    margin = b.sdf_margin if b.sdf_margin is not None else 0.25 * float(np.ptp(block.surface.vertices, axis=0).max())
-    grid = _distance_grid(b.file, b.scale, float(spacing), float(margin), block.surface)
+    grid, _ = _solid_grid(b, block.surface)
     to_body = block.template.R_body.T
     return Shapes.mesh(grid, block.surface.corners, origin=-to_body @ block.properties.centre, rot=to_body, body=k)
 
@@ -198,18 +194,25 @@ def _grid_piece_shapes(b, fill, first: int) -> list[Shapes]:
     """The pieces of a bonded grid (blocks ``first`` …) as the fluid sees them: each its signed
     distance max(d_S, d_U) on a grid (dem/grid_fill.py; spacing and margin as a mesh block's), in
     its body (principal) frame."""
-    spacing = b.sdf_spacing if b.sdf_spacing is not None else 0.5 * b.radius
-    margin = b.sdf_margin if b.sdf_margin is not None else 0.25 * float(np.ptp(fill.surface.vertices, axis=0).max())
-    key = (b.file, b.scale, b.grid_size, float(spacing), float(margin))
+    whole, margin = _solid_grid(b, fill.surface)
+    key = (b.file, b.scale, b.grid_size, margin, tuple(whole.dims))
     if key not in _PIECE_GRIDS:
         _PIECE_GRIDS.clear()
-        whole = _distance_grid(b.file, b.scale, float(spacing), float(margin), fill.surface)
-        _PIECE_GRIDS[key] = [piece_grid(whole, p, fill.origin, fill.size, float(margin)) for p in fill.pieces]
+        _PIECE_GRIDS[key] = [piece_grid(whole, p, fill.origin, fill.size, margin) for p in fill.pieces]
     out = []
     for k, (p, grid) in enumerate(zip(fill.pieces, _PIECE_GRIDS[key])):
         to_body = p.template.R_body.T
         out.append(Shapes.mesh(grid, p.corners, origin=-to_body @ p.properties.centre, rot=to_body, body=first + k))
     return out
+
+
+def _solid_grid(b, surface) -> tuple[DistanceGrid, float]:
+    """The signed-distance grid of the solid of block ``b`` (shape mesh) bounded by ``surface``
+    and its margin [m]: node spacing ``sdf_spacing`` (default radius/2), reaching ``sdf_margin``
+    (default a quarter of the solid's largest extent) beyond the surface."""
+    spacing = b.sdf_spacing if b.sdf_spacing is not None else 0.5 * b.radius
+    margin = b.sdf_margin if b.sdf_margin is not None else 0.25 * float(np.ptp(surface.vertices, axis=0).max())
+    return _distance_grid(b.file, b.scale, float(spacing), float(margin), surface), float(margin)
 
 
 _PIECE_GRIDS: dict = {}

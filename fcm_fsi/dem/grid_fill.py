@@ -218,7 +218,7 @@ def union_distance(points: np.ndarray, cells: np.ndarray, lo, g: float) -> np.nd
 
 def outer_faces(cells: np.ndarray, lo, g: float) -> list[tuple]:
     """The faces of the union of ``cells`` not shared by two of them: (axis k, plane x_k [m],
-    outward sign ±1, lower corner (3,) [m] of the face's square)."""
+    outward sign ±1, lower corner (3,) [m] of the face's square, its edge g [m])."""
     own = {tuple(int(v) for v in c) for c in cells}
     faces = []
     for c in sorted(own):
@@ -229,11 +229,9 @@ def outer_faces(cells: np.ndarray, lo, g: float) -> list[tuple]:
                 if tuple(nb) in own:
                     continue
                 corner = lo + g * np.asarray(c, float)
-                plane = corner[k] + (g if s > 0 else 0.0)
-                corner = corner.copy()
-                corner[k] = plane
-                faces.append((k, plane, s, corner))
-    return [(k, plane, s, corner, g) for k, plane, s, corner in faces]
+                corner[k] += g if s > 0 else 0.0
+                faces.append((k, corner[k], s, corner, g))
+    return faces
 
 
 def _rectangle_distance(p: np.ndarray, face) -> np.ndarray:
