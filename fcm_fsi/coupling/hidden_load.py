@@ -96,6 +96,7 @@ class HiddenLoad:
         """From the level set at the mesh vertices with the fill (``level``, as the cut was
         just updated with) and the poses: what is hidden, the cut cells' owners, the solid
         cells, and where P is read."""
+        self.surface.forget()                                       # the samples are classified anew
         geo = self.cut.geom_cells
         plain, _ = self.plain.evaluate(self.points, pos, quat)    # [m] the bodies' level set without the fill
         filled = plain - level > self._fill_eps                     # where the fill (or a neighbour) sets it

@@ -53,47 +53,28 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from mpi4py import MPI
-from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import spsolve
-from scipy.spatial import cKDTree
 
+from .hidden_graph import (
+    GRAPH_REACH,
+    HiddenGraph,
+    LaplaceSolver,
+    chain_conductance,
+    hidden_pressure,
+    interpolate_hidden,
+    piezometric_extension,
+    radius_conductance,
+    symmetric_graph,
+)
 from .levelset import Shapes
 from .levelset_reference import signed_distance_reference
 from .locate import NearPairs, PointLocator
 from .surface_samples import surface_samples
 
+__all__ = ["NOT_CUT", "HiddenSurface", "body_samples", "chain_conductance", "hidden_pressure", "interpolate_hidden",
+           "radius_conductance"]
+
 #: ``cut_owner`` of a cell that Γ does not cut (any body's sample in it may be wetted)
 NOT_CUT = -9
-#: samples closer than this × the spacing are neighbours in the surface graph (a sample
-#: grid's diagonal neighbours are at √2 spacings at most)
-GRAPH_REACH = 1.6
-
-
-def symmetric_graph(i: np.ndarray, j: np.ndarray, c: np.ndarray, n: int) -> sp.csr_matrix:
-    """The (n, n) conductance matrix with c on the links (i, j) and (j, i)."""
-    return sp.coo_matrix((np.concatenate([c, c]), (np.concatenate([i, j]), np.concatenate([j, i]))),
-                         shape=(n, n)).tocsr()
-
-
-def chain_conductance(lengths: np.ndarray) -> sp.csr_matrix:
-    """The closed chain of samples of one curve (cyclic order) with conductance
-    1/(arc distance) between consecutive midpoints: its harmonic functions are linear in arc
-    length."""
-    n = len(lengths)
-    i = np.arange(n)
-    j = (i + 1) % n
-    c = 2.0 / (lengths[i] + lengths[j])
-    return symmetric_graph(i, j, c, n)
-
-
-def radius_conductance(points: np.ndarray, spacing: float) -> sp.csr_matrix:
-    """Samples closer than :data:`GRAPH_REACH` × ``spacing`` linked with conductance
-    1/distance² (on a uniform grid the five-point Laplacian)."""
-    pairs = cKDTree(points).query_pairs(GRAPH_REACH * spacing, output_type="ndarray")
-    i, j = pairs[:, 0], pairs[:, 1]
-    c = 1.0 / np.sum((points[i] - points[j]) ** 2, axis=1)
-    n = len(points)
-    return symmetric_graph(i, j, c, n)
 
 
 def body_samples(shapes: Shapes, body: int, spacing: float,
@@ -188,147 +169,11 @@ def crease_distance(shapes: Shapes, body: int, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def interpolate_hidden(hidden: np.ndarray, values: np.ndarray, conductance: sp.spmatrix,
-                       solver: LaplaceSolver | None = None) -> np.ndarray:
-    """``values`` (n,) or (n, k) at every sample: wetted samples keep theirs, hidden ones get
-    the harmonic extension of the wetted values over the sample graph of ``conductance``
-    (n, n) (Σ_j c_ij (v_j − v_i) = 0 at each hidden sample), solved by ``solver`` (a fresh
-    :class:`LaplaceSolver` by default). Hidden samples with no path to a wetted one: NaN."""
-    out = np.array(values, dtype=float, copy=True)
-    H, W = np.flatnonzero(hidden), np.flatnonzero(~np.asarray(hidden, bool))
-    if H.size == 0:
-        return out
-    C = sp.csr_matrix(conductance)
-    A, B = C[H][:, H], C[H][:, W]
-    to_wet = np.asarray(B.sum(axis=1)).ravel()
-    ncomp, label = connected_components(A, directed=False)
-    reached = (np.bincount(label, weights=to_wet, minlength=ncomp) > 0)[label]
-    out[H[~reached]] = np.nan
-    if reached.any():
-        A, B = A[reached][:, reached], B[reached]
-        L = sp.diags(np.asarray(A.sum(axis=1)).ravel() + to_wet[reached]) - A
-        rhs = B @ out[W]
-        solver = LaplaceSolver() if solver is None else solver
-        out[H[reached]] = solver.solve(L.tocsr(), rhs.reshape(len(rhs), -1), H[reached]).reshape(rhs.shape)
-    return out
-
-
 #: a contact link between hidden samples of two bodies stays while they are closer than this ×
 #: the reach that made it
 LINK_HYSTERESIS = 1.1
 #: the candidates for contact links are searched to this × the reach beyond the links' range
 CONTACT_MARGIN = 0.5
-
-#: graph Laplacians with more unknowns than this are solved by preconditioned CG, smaller ones by
-#: sparse LU (whose fill-in makes the 10⁵ hidden samples of a building's joints slow)
-DIRECT_LIMIT = 5000
-#: the CG preconditioner of the larger graph Laplacians, and the tolerance relative to ‖rhs‖ (on
-#: the tsunami building's 73,000 joint samples the load moves by 3e-9 of itself from 1e-10 to this,
-#: at 2/3 of the iterations)
-GRAPH_PC = "icc"
-GRAPH_RTOL = 1e-8
-
-
-class LaplaceSolver:
-    """L x = rhs for the SPD graph Laplacian ``L`` of the hidden samples (Dirichlet rows of the
-    mouths eliminated), one column of ``rhs`` (n, k) at a time; every rank holds the same
-    (replicated) system. Small systems by sparse LU on every rank; larger ones by CG with
-    :data:`GRAPH_PC`, column j on rank j mod size of ``comm`` (the same arithmetic on any number
-    of ranks), the preconditioner kept while the graph's links stay the same (a structure at
-    rest: only the conductances' values and the mouths' pressures change from step to step).
-    Each solve starts from the last solution of the same samples (``ids``, their indices among
-    all samples; samples new to the hidden set from the mean of the last solution): the hidden
-    set changes by a few samples at the mouths from step to step, and the solution changes
-    little."""
-
-    def __init__(self, comm=None) -> None:
-        self.comm = comm
-        self._pattern = None         # (indptr, indices) of the matrix the preconditioner was built for
-        self._ksp = self._A = None
-        self._last_ids = None        # sample indices of the last solve (sorted)
-        self._last = None            # (n, k) last solutions
-
-    def _guess(self, ids: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray | None:
-        """The last solution at ``ids`` (the mean of the last solution where a sample is new)."""
-        if self._last is None or self._last.shape[1] != shape[1]:
-            return None
-        if ids is None:
-            return self._last if self._last.shape == shape else None
-        at = np.searchsorted(self._last_ids, ids)
-        at = np.minimum(at, len(self._last_ids) - 1)
-        known = self._last_ids[at] == ids
-        return np.where(known[:, None], self._last[at], self._last.mean(axis=0)[None, :])
-
-    def solve(self, L: sp.csr_matrix, rhs: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
-        if L.shape[0] <= DIRECT_LIMIT:
-            return np.reshape(spsolve(L.tocsc(), rhs), rhs.shape)
-        rank, size = (0, 1) if self.comm is None else (self.comm.rank, self.comm.size)
-        columns = range(rank, rhs.shape[1], size)
-        out = np.zeros_like(rhs)
-        self.iterations = 0
-        if len(columns):
-            self._solve_columns(L, rhs, ids, columns, out)
-        if size > 1:
-            self.comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
-        self._last = out.copy()
-        self._last_ids = None if ids is None else np.asarray(ids).copy()
-        return out
-
-    def _solve_columns(self, L: sp.csr_matrix, rhs: np.ndarray, ids, columns, out: np.ndarray) -> None:
-        """CG for the ``columns`` of ``rhs`` into ``out``."""
-        from petsc4py import PETSc
-        L = sp.csr_matrix(L)
-        L.sort_indices()
-        same = self._pattern is not None and np.array_equal(self._pattern[0], L.indptr) \
-            and np.array_equal(self._pattern[1], L.indices)
-        if same:
-            self._A.setValuesCSR(L.indptr.astype(PETSc.IntType), L.indices.astype(PETSc.IntType), L.data)
-            self._A.assemble()
-        else:
-            self._free_operator()
-            self._A = PETSc.Mat().createAIJ(size=L.shape, csr=(L.indptr.astype(PETSc.IntType),
-                                                               L.indices.astype(PETSc.IntType), L.data),
-                                            comm=PETSc.COMM_SELF)
-            self._ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-            self._ksp.setType("cg")
-            self._ksp.getPC().setType(GRAPH_PC)
-            self._ksp.setTolerances(rtol=GRAPH_RTOL, atol=0.0, max_it=2000)
-            self._pattern = (L.indptr.copy(), L.indices.copy())
-        ksp = self._ksp
-        ksp.setOperators(self._A)
-        ksp.getPC().setReusePreconditioner(same)
-        guess = self._guess(ids, rhs.shape)
-        ksp.setInitialGuessNonzero(guess is not None)
-        x, b = self._A.createVecs()
-        for k in columns:
-            b.array[:] = rhs[:, k]
-            x.array[:] = guess[:, k] if guess is not None else 0.0
-            ksp.solve(b, x)
-            if ksp.getConvergedReason() <= 0:
-                raise RuntimeError(f"hidden-surface pressure: CG did not converge ({ksp.getConvergedReason()})")
-            self.iterations += ksp.getIterationNumber()
-            out[:, k] = x.array
-        x.destroy(), b.destroy()
-
-    def _free_operator(self) -> None:
-        for obj in (self._ksp, self._A):
-            if obj is not None:
-                obj.destroy()
-        self._ksp = self._A = self._pattern = None
-
-    def destroy(self) -> None:
-        self._free_operator()
-        self._last = self._last_ids = None
-
-
-def hidden_pressure(hidden: np.ndarray, p: np.ndarray, rho: np.ndarray, gx: np.ndarray,
-                    conductance: sp.spmatrix, solver: LaplaceSolver | None = None) -> np.ndarray:
-    """Pressure [Pa] at the samples: wetted ones keep ``p``; on the hidden ones the
-    piezometric pressure p − ρ g·x and the density ρ are extended from the mouths
-    (:func:`interpolate_hidden`) and p = (p − ρ g·x) + ρ g·x at the sample (``gx`` = g·x
-    [m²/s²] per sample). Exact for water at rest whatever the path."""
-    both = interpolate_hidden(hidden, np.column_stack([p - rho * gx, rho]), conductance, solver)
-    return both[:, 0] + both[:, 1] * gx
 
 
 class HiddenSurface:
@@ -364,45 +209,56 @@ class HiddenSurface:
         self.unreached = 0                           # bodies with hidden samples no mouth reaches, last call
         self.last = {}                               # the samples of the last call, for plots
         self._links = np.zeros(0, np.int64)          # contact links (i n + j, i < j) of the last call
+        self._kept = None                            # the last classification (_Classified)
         # candidate pairs of samples of different bodies for the links, searched again for a body
         # only when it has moved CONTACT_MARGIN / 2 reaches
         reach = GRAPH_REACH * self.spacing
         self.near = NearPairs(self.body, LINK_HYSTERESIS * reach, CONTACT_MARGIN * reach)
 
-    def _values(self, functions, points: np.ndarray, slots: np.ndarray, body: np.ndarray, cut_owner: np.ndarray,
-                solid: np.ndarray, filled: np.ndarray, bridged: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(len(functions), n) values at ``points`` (n, 3) (their slots in :attr:`locator`:
-        the samples' indices, n_samples + index for their probe points) on every rank, NaN outside the
-        mesh, and per point whether the fluid does not reach it: outside the mesh, every cell
-        containing it solid (``solid``, local cells: no vertex in the fluid; for the points
-        flagged ``bridged``, near a clump's crease, only solid cells with a vertex the fill sets,
-        ``filled``), or a cell containing it cut and giving its load to others than the point's
-        ``body``
-        (``cut_owner`` (local cells, 2): owner and second owner of each cut cell's load,
-        NOT_CUT for the cells Γ does not cut). Owned cells only, summed over the ranks: the
-        same on any partition."""
+    def forget(self) -> None:
+        """The cut changed (a rebuild): the next :meth:`load` locates and classifies the samples
+        anew, even at the same poses."""
+        self._kept = None
+
+    def _locate(self, share, points: np.ndarray, slots: np.ndarray, body: np.ndarray, cut_owner: np.ndarray,
+                solid: np.ndarray, filled: np.ndarray, bridged: np.ndarray | None = None):
+        """``points`` (n, 3) (their slots in :attr:`locator`: the samples' indices, n_samples +
+        index for their probe points) located in this rank's owned cells (a :class:`_Located`),
+        the P1 ``share`` χ at them (NaN outside the mesh) and per point whether the fluid does not
+        reach it: outside the mesh, every cell containing it solid (``solid``, local cells: no
+        vertex in the fluid; for the points flagged ``bridged``, near a clump's crease, only
+        solid cells with a vertex the fill sets, ``filled``), or a cell containing it cut and
+        giving its load to others than the point's ``body`` (``cut_owner`` (local cells, 2):
+        owner and second owner of each cut cell's load, NOT_CUT for the cells Γ does not cut).
+        Owned cells only, summed over the ranks: the same on any partition."""
         n = len(points)
         point, cell = self.locator.locate(slots, points)
         foreign = (cut_owner[cell, 0] != NOT_CUT) & (cut_owner[cell, 0] != body[point]) \
             & (cut_owner[cell, 1] != body[point])
-        counts = np.zeros((4, n))
-        counts[0] = np.bincount(point, minlength=n)                      # containing cells
-        counts[1] = np.bincount(point[solid[cell]], minlength=n)         # of them solid
-        counts[2] = np.bincount(point[foreign], minlength=n)             # of them another body's
-        counts[3] = np.bincount(point[solid[cell] & filled[cell]], minlength=n)   # solid, the fill's
+        local = np.zeros((6, n))                      # χ, hits, counts: one reduction
         found, first = np.unique(point, return_index=True)
-        local = np.zeros((len(functions) + 1 + len(counts), n))      # values, hits, counts: one reduction
-        local[: len(functions), found] = self.locator.p1.values(functions, points[found], cell[first])
-        local[len(functions), found] = 1.0
-        local[len(functions) + 1:] = counts
+        at = _Located(found, points[found], cell[first])
+        local[0, found] = self.locator.p1.values((share,), at.points, at.cells)[0]
+        local[1, found] = 1.0
+        local[2] = np.bincount(point, minlength=n)                            # containing cells
+        local[3] = np.bincount(point[solid[cell]], minlength=n)               # of them solid
+        local[4] = np.bincount(point[foreign], minlength=n)                   # of them another body's
+        local[5] = np.bincount(point[solid[cell] & filled[cell]], minlength=n)   # solid, the fill's
         self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
-        hit, counts = local[len(functions)], local[len(functions) + 1:]
-        local = local[: len(functions)]
+        at.hit = local[1]
+        counts = local[2:]
         bridged = np.zeros(n, bool) if bridged is None else bridged
         all_solid = (counts[1] == counts[0]) & (~bridged | (counts[3] == counts[0]))
         unreached = (counts[0] == 0) | all_solid | (counts[2] > 0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(hit > 0, local / np.maximum(hit, 1.0), np.nan), unreached
+        return at, at.average(local[0]), unreached
+
+    def _values(self, functions, at: _Located) -> np.ndarray:
+        """(len(functions), n) values of the P1 ``functions`` at the points ``at`` holds, on
+        every rank (the ranks' owned cells summed and averaged), NaN outside the mesh."""
+        local = np.zeros((len(functions), len(at.hit)))
+        local[:, at.found] = self.locator.p1.values(functions, at.points, at.cells)
+        self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
+        return at.average(local)
 
     def _contact_conductance(self, xw: np.ndarray, hidden: np.ndarray) -> sp.csr_matrix:
         """Links between hidden samples of different bodies closer than :data:`GRAPH_REACH`
@@ -431,56 +287,104 @@ class HiddenSurface:
         """Force (nb, 3) [N] and torque about each body's centre (nb, 3) [N m] of ``pressure``
         (the static pressure, a P1 function) on each body's whole surface: the wetted samples
         take their own, the hidden ones :func:`hidden_pressure` from the wetted ones around
-        them. Hidden: where the P1 ``share`` χ is 1 (the fill or a neighbour sets the level set
-        in a cut cell at it), or where the fluid does not reach at all (outside the mesh, in
-        solid cells only, or in a cut cell whose load goes to another body: :meth:`_values`) —
-        unless the sample faces open fluid: the point ``probe`` [m] out along its normal lies
-        in the mesh, in a cell with fluid, not in another body's cut (the side of a wall inside
-        the fill's corner at the floor, whose water is the open water beside it). ``density``
-        is a P1 function [kg/m³] or a number, ``gravity`` (dim,) [m/s²], ``depth`` [m] the 2D
-        span (1 in 3D). Collective; the same on all ranks."""
+        them (which samples are hidden: :meth:`_classify`). ``density`` is a P1 function
+        [kg/m³] or a number, ``gravity`` (dim,) [m/s²], ``depth`` [m] the 2D span (1 in 3D).
+        The classification and the graph are kept while the poses (``pos``, ``rot``) and the
+        cut stay (the later passes of an implicit step): only the values are read again.
+        Collective; the same on all ranks."""
         force, torque = np.zeros((self.nb, 3)), np.zeros((self.nb, 3))
         self.hidden_measure[:] = 0.0
         self.unreached = 0
         if self.body.size == 0:
             return force, torque
+        g = np.asarray(gravity, float)[: self.dim]
+        k = self._kept
+        if k is None or not (np.array_equal(k.pos, pos) and np.array_equal(k.rot, rot)):
+            k = self._kept = self._classify(share, g, cut_owner, solid, filled, pos, rot)
+        fns = (pressure,) if np.isscalar(density) else (pressure, density)
+        vals = self._values(fns, k.at)
+        rho = np.full(len(k.xw), float(density)) if np.isscalar(density) else np.nan_to_num(vals[1])
+        p = np.nan_to_num(vals[0])
+        if k.probe_at is not None:
+            # a hidden sample that faces open fluid takes the static pressure a probe distance out,
+            # moved hydrostatically to it
+            pv = self._values(fns, k.probe_at)
+            f = k.facing
+            idx = k.cand[f]
+            rho_probe = np.full(len(k.cand), float(density)) if np.isscalar(density) else np.nan_to_num(pv[1])
+            p[idx] = pv[0][f] + rho_probe[f] * (k.gx[idx] - k.probe[f, : self.dim] @ g)
+            rho[idx] = rho_probe[f]
+        ph = piezometric_extension(k.graph, p, rho, k.gx, self.solver)
+        reached = np.isfinite(ph)
+        hidden = k.hidden
+        self.unreached = int(np.unique(self.body[hidden & ~reached]).size)
+        f = -(np.where(reached, ph, 0.0) * self.weight * depth)[:, None] * k.nw     # −p n dA per sample
+        m = np.cross(k.xw - pos[self.body, :3], f)
+        for i in range(3):
+            force[:, i] = np.bincount(self.body, weights=f[:, i], minlength=self.nb)
+            torque[:, i] = np.bincount(self.body, weights=m[:, i], minlength=self.nb)
+        self.hidden_measure[:] = np.bincount(self.body[hidden], weights=self.weight[hidden], minlength=self.nb)
+        self.last = {"x": k.xw, "n": k.nw, "w": self.weight, "body": self.body, "hidden": hidden,
+                     "p": vals[0], "p_hidden": ph}
+        return force, torque
+
+    def _classify(self, share, g: np.ndarray, cut_owner: np.ndarray, solid: np.ndarray, filled: np.ndarray,
+                  pos: np.ndarray, rot: np.ndarray) -> _Classified:
+        """The samples at the poses ``pos``, ``rot``: located, which are hidden, and the graph of
+        the hidden ones. Hidden: where the P1 ``share`` χ is 1 (the fill or a neighbour sets the
+        level set in a cut cell at it), or where the fluid does not reach at all (outside the
+        mesh, in solid cells only, or in a cut cell whose load goes to another body:
+        :meth:`_locate`) — unless the sample faces open fluid: the point ``probe`` [m] out along
+        its normal lies in the mesh, in a cell with fluid, not in another body's cut, not the
+        fill's (the side of a wall inside the fill's corner at the floor, whose water is the open
+        water beside it). Collective."""
         R = rot[self.body]
         xw = pos[self.body, :3] + np.einsum("nij,nj->ni", R, self.x_body)
         nw = np.einsum("nij,nj->ni", R, self.n_body)
         if self.dim == 2:
             xw[:, 2], nw[:, 2] = 0.0, 0.0
-        fns = (share, pressure) + (() if np.isscalar(density) else (density,))
         ns = len(xw)
-        vals, whole = self._values(fns, xw, np.arange(ns), self.body, cut_owner, solid, filled, self.bridged)
-        rho = np.full(len(xw), float(density)) if np.isscalar(density) else np.nan_to_num(vals[2])
-        hidden = whole | (np.nan_to_num(vals[0]) >= 1.0 - 1e-9)
-        g = np.asarray(gravity, float)[: self.dim]
-        gx = xw[:, : self.dim] @ g
-        p = np.nan_to_num(vals[1])
-        cand = np.flatnonzero(hidden)
-        if self.probe > 0 and cand.size:
-            # a hidden sample that faces open fluid (the point a probe distance out along its
-            # normal is in the mesh, in a cell with fluid, not in another body's cut, not the
-            # fill's: the side of a wall inside the fill's corner at the floor) is wetted, with
-            # the static pressure there moved hydrostatically to it
-            probe = xw[cand] + self.probe * nw[cand]
-            pv, closed = self._values(fns, probe, ns + cand, self.body[cand], cut_owner, solid, filled)
-            facing = ~closed & np.isfinite(pv[1]) & (np.nan_to_num(pv[0]) < 1.0 - 1e-9)
-            idx = cand[facing]
-            rho_probe = np.full(len(cand), float(density)) if np.isscalar(density) else np.nan_to_num(pv[2])
-            p[idx] = pv[1][facing] + rho_probe[facing] * (gx[idx] - probe[facing, : self.dim] @ g)
-            rho[idx] = rho_probe[facing]
-            hidden[idx] = False
-        graph = self.conductance + self._contact_conductance(xw, hidden)
-        ph = hidden_pressure(hidden, p, rho, gx, graph, self.solver)
-        reached = np.isfinite(ph)
-        self.unreached = int(np.unique(self.body[hidden & ~reached]).size)
-        f = -(np.where(reached, ph, 0.0) * self.weight * depth)[:, None] * nw     # −p n dA per sample
-        m = np.cross(xw - pos[self.body, :3], f)
-        for k in range(3):
-            force[:, k] = np.bincount(self.body, weights=f[:, k], minlength=self.nb)
-            torque[:, k] = np.bincount(self.body, weights=m[:, k], minlength=self.nb)
-        self.hidden_measure[:] = np.bincount(self.body[hidden], weights=self.weight[hidden], minlength=self.nb)
-        self.last = {"x": xw, "n": nw, "w": self.weight, "body": self.body, "hidden": hidden,
-                     "p": vals[1], "p_hidden": ph}
-        return force, torque
+        at, chi, whole = self._locate(share, xw, np.arange(ns), self.body, cut_owner, solid, filled, self.bridged)
+        hidden = whole | (np.nan_to_num(chi) >= 1.0 - 1e-9)
+        k = _Classified(pos.copy(), rot.copy(), xw, nw, xw[:, : self.dim] @ g, at)
+        k.cand = np.flatnonzero(hidden)
+        if self.probe > 0 and k.cand.size:
+            k.probe = xw[k.cand] + self.probe * nw[k.cand]
+            k.probe_at, chi_probe, closed = self._locate(share, k.probe, ns + k.cand, self.body[k.cand], cut_owner,
+                                                         solid, filled)
+            k.facing = ~closed & (k.probe_at.hit > 0) & (np.nan_to_num(chi_probe) < 1.0 - 1e-9)
+            hidden[k.cand[k.facing]] = False
+        k.hidden = hidden
+        k.graph = HiddenGraph(hidden, self.conductance + self._contact_conductance(xw, hidden))
+        return k
+
+
+class _Located:
+    """Points located in this rank's owned cells: ``found`` the indices of the points it holds,
+    ``points`` those points, ``cells`` one owned cell of each; ``hit`` (n,) how many ranks hold
+    each point (0: outside the mesh)."""
+
+    def __init__(self, found: np.ndarray, points: np.ndarray, cells: np.ndarray) -> None:
+        self.found, self.points, self.cells = found, points, cells
+        self.hit = np.zeros(0)
+
+    def average(self, summed: np.ndarray) -> np.ndarray:
+        """Values summed over the ranks, divided by the ranks that hold each point; NaN outside the mesh."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.hit > 0, summed / np.maximum(self.hit, 1.0), np.nan)
+
+
+class _Classified:
+    """What the poses and the cut fix of a :meth:`HiddenSurface.load` (:meth:`HiddenSurface._classify`):
+    the poses, the samples' world positions ``xw``, normals ``nw`` and g·x ``gx``, where they
+    are (``at``), the hidden candidates ``cand`` with their probe points (``probe``,
+    ``probe_at``) and which face open fluid (``facing``), the hidden flags and their graph."""
+
+    def __init__(self, pos, rot, xw, nw, gx, at: _Located) -> None:
+        self.pos, self.rot, self.xw, self.nw, self.gx, self.at = pos, rot, xw, nw, gx, at
+        self.cand = np.zeros(0, np.int64)
+        self.probe = np.zeros((0, 3))
+        self.probe_at = None
+        self.facing = np.zeros(0, bool)
+        self.hidden = np.zeros(len(xw), bool)
+        self.graph = None

@@ -177,7 +177,7 @@ def test_large_hidden_patches_are_solved_by_cg_to_the_direct_solution(monkeypatc
     changed (started from the last solution of the samples hidden in both). CG stops at
     GRAPH_RTOL of the residual, which bounds the solution's error by the graph's condition
     number × GRAPH_RTOL (measured 4–15 × here); checked to 100 ×."""
-    import fcm_fsi.fcm.hidden as hidden_module
+    import fcm_fsi.fcm.hidden_graph as hidden_module
     x, n, dA = surface_samples(BOX, np.array([1.0, 0.5, 1.5]), np.zeros(3), np.eye(3), 0.02, 3)
     C = radius_conductance(x, 0.02)
     hidden = x[:, 2] < 1.2
@@ -249,9 +249,38 @@ def test_a_block_lying_on_the_floor_in_still_water_gets_archimedes_lift(mode):
     assert model.exchange.error < 1e-10              # the fluid's own load still balances
     # one point alone (a rank may find a single probe: dolfinx's eval then returns a flat array)
     h = model.cuts.hidden
-    one, _ = h.surface._values((model.fluid.p_out,), last["x"][:1], np.zeros(1, int), last["body"][:1], h.cut_owner,
-                               h.solid_cell, h.filled_cell)
+    at, _, _ = h.surface._locate(h.share, last["x"][:1], np.zeros(1, int), last["body"][:1], h.cut_owner,
+                                 h.solid_cell, h.filled_cell)
+    one = h.surface._values((model.fluid.p_out,), at)
     assert one.shape == (1, 1) and np.isfinite(one).all()
+
+
+def test_the_samples_are_classified_once_while_the_poses_and_the_cut_stay():
+    """The later passes of an implicit step (same poses, same cut) read only the new pressure at
+    the kept samples: the load equals the one from samples located and classified anew, to
+    the bit; a moved block or a rebuilt cut classifies them again."""
+    data = resting_block("flat")
+    _, model = fluid_load_at_rest(data)
+    h, st = model.cuts.hidden, model.system.state
+    p = model.fluid.p_out
+    p.x.array[:] = 1.1 * p.x.array + 37.0               # another pass's pressure
+    rho = model.cuts.node_density()
+    centres = st.pos[:, :2]
+
+    def load():
+        h.exchange(p, rho, st.pos, st.rotation_matrices(), centres)
+        return h.surface_force.copy(), h.surface_torque.copy(), h.surface._kept
+
+    kept_force, kept_torque, kept = load()
+    assert kept is not None
+    h.surface.forget()
+    fresh_force, fresh_torque, fresh = load()
+    assert fresh is not kept
+    np.testing.assert_array_equal(kept_force, fresh_force)
+    np.testing.assert_array_equal(kept_torque, fresh_torque)
+    assert load()[2] is fresh                            # same poses: kept
+    st.pos[0, 0] += 1e-6                                  # a block moved: classified anew
+    assert load()[2] is not fresh
 
 
 def test_the_tilted_block_on_the_stopper_s_edge_gets_archimedes_lift():

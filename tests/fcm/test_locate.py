@@ -5,7 +5,14 @@ from dolfinx import fem, geometry, mesh
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
-from fcm_fsi.fcm.locate import NearPairs, P1Values, PointLocator, first_component_at
+from fcm_fsi.fcm.locate import (
+    NearPairs,
+    P1Values,
+    PointLocator,
+    close_active_pairs,
+    close_active_pairs_reference,
+    first_component_at,
+)
 
 
 def searched(msh, points):
@@ -76,6 +83,20 @@ def test_near_pairs_equal_a_fresh_search_as_bodies_move():
         np.testing.assert_allclose(d2, np.sum((x[i] - x[j]) ** 2, axis=1))
         if step:
             assert near.searched_bodies <= 2
+
+
+def test_close_active_pairs_kernel_equals_its_numpy_twin():
+    """The Numba filter of candidate pairs gives the NumPy twin's pairs and squared distances to
+    the bit (5,000 random points, 40,000 candidates, a third inactive)."""
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-1.0, 1.0, (5000, 3))
+    i, j = rng.integers(0, 5000, 40000), rng.integers(0, 5000, 40000)
+    active = rng.uniform(size=5000) > 0.33
+    got = close_active_pairs(x, i, j, active, 0.5)
+    want = close_active_pairs_reference(x, i, j, active, 0.5)
+    assert 1000 < len(want[0]) < 20000
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
