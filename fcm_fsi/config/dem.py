@@ -178,8 +178,9 @@ class DEMConfig:
                                                         "blocks follow blocks and generators)")
     cohesive: CohesiveConfig | None = param(None, doc="cohesive law of the bonds between the structure's blocks and "
                                                       "between bonded blocks (required with either)")
-    ledger_every: int = param(100, unit="steps", doc="energy-ledger and force–displacement CSV row every this many "
-                                                     "DEM steps", ge=1)
+    ledger_every: int = param(100, unit="steps", doc="DEM-only runs: energy-ledger and force–displacement CSV "
+                                                     "row every this many DEM steps (coupled runs keep no ledger)",
+                            ge=1)
 
     def __post_init__(self) -> None:
         names = [m.name for m in self.materials]

@@ -74,7 +74,9 @@ class CoupledModel:
     def __init__(self, case: Case, comm: MPI.Comm, case_dir: Path | None = None, out_dir: Path | None = None):
         self.case, self.comm = case, comm
         cp = case.coupling
-        self.system = build_system(case.dem)
+        # no energy ledger: a coupled run writes none (the DEM-only runs' dem_energy.csv), and without
+        # it an unbonded DEM takes the fused step (bit-identical, tests/dem/test_dem_fused.py)
+        self.system = build_system(case.dem, with_ledger=False)
         st = self.system.state
         shapes = shapes_of_blocks(case.dem, st, cp.min_thickness)     # the blocks as the fluid sees them
         block_faces = None

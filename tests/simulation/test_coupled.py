@@ -492,6 +492,33 @@ def test_retaken_passes_give_the_step_computed_from_scratch(method):
     assert np.abs(fast.fluid.pf.phi.x.array - slow.fluid.pf.phi.x.array).max() < 1e-8
 
 
+def test_the_coupled_dem_keeps_no_ledger_and_steps_as_with_one():
+    """A coupled run keeps no energy ledger (none of its outputs reads it), so an unbonded DEM
+    takes the fused step; the blocks and the flow are those of the stage-by-stage step with
+    the ledger, to the bit (six implicit steps of the falling block)."""
+    from mpi4py import MPI
+
+    from fcm_fsi.dem.ledger import Ledger
+    from fcm_fsi.io.timing import StageTimer
+    from fcm_fsi.simulation.coupled import CoupledModel
+
+    runs = []
+    for ledger in (False, True):
+        model = CoupledModel(case_from_dict(falling_block_case()), MPI.COMM_WORLD)
+        assert model.system.ledger is None and model.system._fusable() is not None
+        if ledger:
+            model.system.ledger = Ledger()
+        timer = StageTimer()
+        for k in range(6):
+            model.advance(2e-3 * k, 2e-3, timer)
+        runs.append(model)
+    fused, staged = runs
+    assert staged.system._fusable() is None
+    for name in ("pos", "quat", "vel", "angmom"):
+        np.testing.assert_array_equal(getattr(fused.system.state, name), getattr(staged.system.state, name))
+    np.testing.assert_array_equal(fused.ns.U.x.array, staged.ns.U.x.array)
+
+
 def test_implicit_quasi_newton_run_restarts_to_the_uninterrupted_run(tmp_path):
     """Issue #9 item 5 for the tsunami's coupling (implicit passes, ``iqn_ils``, retaken passes):
     what a step keeps between its passes (cut, m̃, factorisation, the quasi-Newton differences)
