@@ -59,8 +59,6 @@ from .hidden_graph import (
     HiddenGraph,
     LaplaceSolver,
     chain_conductance,
-    hidden_pressure,
-    interpolate_hidden,
     piezometric_extension,
     radius_conductance,
     symmetric_graph,
@@ -69,9 +67,6 @@ from .levelset import Shapes
 from .levelset_reference import signed_distance_reference
 from .locate import NearPairs, PointLocator
 from .surface_samples import surface_samples
-
-__all__ = ["NOT_CUT", "HiddenSurface", "body_samples", "chain_conductance", "hidden_pressure", "interpolate_hidden",
-           "radius_conductance"]
 
 #: ``cut_owner`` of a cell that Γ does not cut (any body's sample in it may be wetted)
 NOT_CUT = -9
@@ -179,7 +174,8 @@ CONTACT_MARGIN = 0.5
 class HiddenSurface:
     """The samples of the surface of every body that has level-set primitives (a body without
     any, such as a foundation below the ground, is not in the fluid) (:func:`body_samples`) and
-    the load of :func:`hidden_pressure` on the hidden ones. ``share`` and ``pressure`` are P1
+    the load of the static pressure on them, the hidden ones' by
+    :func:`~.hidden_graph.piezometric_extension`. ``share`` and ``pressure`` are P1
     functions on ``mesh``; 2D meshes sample each body's section z = 0."""
 
     def __init__(self, mesh, shapes: Shapes, nbodies: int, spacing: float, bridge: float = 0.0,
@@ -237,15 +233,15 @@ class HiddenSurface:
             & (cut_owner[cell, 1] != body[point])
         local = np.zeros((6, n))                      # χ, hits, counts: one reduction
         found, first = np.unique(point, return_index=True)
-        at = _Located(found, points[found], cell[first])
-        local[0, found] = self.locator.p1.values((share,), at.points, at.cells)[0]
+        held, cells = points[found], cell[first]
+        local[0, found] = self.locator.p1.values((share,), held, cells)[0]
         local[1, found] = 1.0
         local[2] = np.bincount(point, minlength=n)                            # containing cells
         local[3] = np.bincount(point[solid[cell]], minlength=n)               # of them solid
         local[4] = np.bincount(point[foreign], minlength=n)                   # of them another body's
         local[5] = np.bincount(point[solid[cell] & filled[cell]], minlength=n)   # solid, the fill's
         self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.SUM)
-        at.hit = local[1]
+        at = _Located(found, held, cells, local[1])
         counts = local[2:]
         bridged = np.zeros(n, bool) if bridged is None else bridged
         all_solid = (counts[1] == counts[0]) & (~bridged | (counts[3] == counts[0]))
@@ -286,8 +282,8 @@ class HiddenSurface:
              filled: np.ndarray, pos: np.ndarray, rot: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
         """Force (nb, 3) [N] and torque about each body's centre (nb, 3) [N m] of ``pressure``
         (the static pressure, a P1 function) on each body's whole surface: the wetted samples
-        take their own, the hidden ones :func:`hidden_pressure` from the wetted ones around
-        them (which samples are hidden: :meth:`_classify`). ``density`` is a P1 function
+        take their own, the hidden ones :func:`~.hidden_graph.piezometric_extension` from the
+        wetted ones around them (which samples are hidden: :meth:`_classify`). ``density`` is a P1 function
         [kg/m³] or a number, ``gravity`` (dim,) [m/s²], ``depth`` [m] the 2D span (1 in 3D).
         The classification and the graph are kept while the poses (``pos``, ``rot``) and the
         cut stay (the later passes of an implicit step): only the values are read again.
@@ -309,11 +305,11 @@ class HiddenSurface:
             # a hidden sample that faces open fluid takes the static pressure a probe distance out,
             # moved hydrostatically to it
             pv = self._values(fns, k.probe_at)
-            f = k.facing
-            idx = k.cand[f]
+            facing = k.facing
+            idx = k.cand[facing]
             rho_probe = np.full(len(k.cand), float(density)) if np.isscalar(density) else np.nan_to_num(pv[1])
-            p[idx] = pv[0][f] + rho_probe[f] * (k.gx[idx] - k.probe[f, : self.dim] @ g)
-            rho[idx] = rho_probe[f]
+            p[idx] = pv[0][facing] + rho_probe[facing] * (k.gx[idx] - k.probe[facing, : self.dim] @ g)
+            rho[idx] = rho_probe[facing]
         ph = piezometric_extension(k.graph, p, rho, k.gx, self.solver)
         reached = np.isfinite(ph)
         hidden = k.hidden
@@ -364,9 +360,8 @@ class _Located:
     ``points`` those points, ``cells`` one owned cell of each; ``hit`` (n,) how many ranks hold
     each point (0: outside the mesh)."""
 
-    def __init__(self, found: np.ndarray, points: np.ndarray, cells: np.ndarray) -> None:
-        self.found, self.points, self.cells = found, points, cells
-        self.hit = np.zeros(0)
+    def __init__(self, found: np.ndarray, points: np.ndarray, cells: np.ndarray, hit: np.ndarray) -> None:
+        self.found, self.points, self.cells, self.hit = found, points, cells, hit
 
     def average(self, summed: np.ndarray) -> np.ndarray:
         """Values summed over the ranks, divided by the ranks that hold each point; NaN outside the mesh."""

@@ -48,8 +48,6 @@ def radius_conductance(points: np.ndarray, spacing: float) -> sp.csr_matrix:
     return symmetric_graph(i, j, c, n)
 
 
-
-
 #: graph Laplacians with more unknowns than this are solved by preconditioned CG, smaller ones by
 #: sparse LU (whose fill-in makes the 10⁵ hidden samples of a building's joints slow)
 DIRECT_LIMIT = 5000
@@ -70,12 +68,14 @@ class LaplaceSolver:
     Each solve starts from the last solution of the same samples (``ids``, their indices among
     all samples; samples new to the hidden set from the mean of the last solution): the hidden
     set changes by a few samples at the mouths from step to step, and the solution changes
-    little."""
+    little. A matrix passed again as the same object is taken as unchanged (a
+    :class:`HiddenGraph` extended for the later passes of an implicit step)."""
 
     def __init__(self, comm=None) -> None:
         self.comm = comm
         self._pattern = None         # (indptr, indices) of the matrix the preconditioner was built for
         self._ksp = self._A = None
+        self._source = None          # the matrix object the operator holds (the same object: values unchanged)
         self._last_ids = None        # sample indices of the last solve (sorted)
         self._last = None            # (n, k) last solutions
 
@@ -107,24 +107,7 @@ class LaplaceSolver:
 
     def _solve_columns(self, L: sp.csr_matrix, rhs: np.ndarray, ids, columns, out: np.ndarray) -> None:
         """CG for the ``columns`` of ``rhs`` into ``out``."""
-        from petsc4py import PETSc
-        L = sp.csr_matrix(L)
-        L.sort_indices()
-        same = self._pattern is not None and np.array_equal(self._pattern[0], L.indptr) \
-            and np.array_equal(self._pattern[1], L.indices)
-        if same:
-            self._A.setValuesCSR(L.indptr.astype(PETSc.IntType), L.indices.astype(PETSc.IntType), L.data)
-            self._A.assemble()
-        else:
-            self._free_operator()
-            self._A = PETSc.Mat().createAIJ(size=L.shape, csr=(L.indptr.astype(PETSc.IntType),
-                                                               L.indices.astype(PETSc.IntType), L.data),
-                                            comm=PETSc.COMM_SELF)
-            self._ksp = PETSc.KSP().create(PETSc.COMM_SELF)
-            self._ksp.setType("cg")
-            self._ksp.getPC().setType(GRAPH_PC)
-            self._ksp.setTolerances(rtol=GRAPH_RTOL, atol=0.0, max_it=2000)
-            self._pattern = (L.indptr.copy(), L.indices.copy())
+        same = self._set_operator(L)
         ksp = self._ksp
         ksp.setOperators(self._A)
         ksp.getPC().setReusePreconditioner(same)
@@ -141,11 +124,37 @@ class LaplaceSolver:
             out[:, k] = x.array
         x.destroy(), b.destroy()
 
+    def _set_operator(self, L: sp.csr_matrix) -> bool:
+        """``L`` as the PETSc operator; returns whether the preconditioner is kept: ``L`` is the
+        last solve's matrix object (a later pass of the same graph: nothing to set) or has its
+        links (new values set); else a new operator, CG and preconditioner."""
+        from petsc4py import PETSc
+        if L is self._source:
+            return True
+        source, L = L, sp.csr_matrix(L)
+        L.sort_indices()
+        indptr, indices = L.indptr.astype(PETSc.IntType), L.indices.astype(PETSc.IntType)
+        same = self._pattern is not None and np.array_equal(self._pattern[0], L.indptr) \
+            and np.array_equal(self._pattern[1], L.indices)
+        if same:
+            self._A.setValuesCSR(indptr, indices, L.data)
+            self._A.assemble()
+        else:
+            self._free_operator()
+            self._A = PETSc.Mat().createAIJ(size=L.shape, csr=(indptr, indices, L.data), comm=PETSc.COMM_SELF)
+            self._ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+            self._ksp.setType("cg")
+            self._ksp.getPC().setType(GRAPH_PC)
+            self._ksp.setTolerances(rtol=GRAPH_RTOL, atol=0.0, max_it=2000)
+            self._pattern = (L.indptr.copy(), L.indices.copy())
+        self._source = source
+        return same
+
     def _free_operator(self) -> None:
         for obj in (self._ksp, self._A):
             if obj is not None:
                 obj.destroy()
-        self._ksp = self._A = self._pattern = None
+        self._ksp = self._A = self._pattern = self._source = None
 
     def destroy(self) -> None:
         self._free_operator()

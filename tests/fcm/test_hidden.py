@@ -9,8 +9,8 @@ import pytest
 from mpi4py import MPI
 
 from fcm_fsi.config import case_from_dict
-from fcm_fsi.fcm.hidden import (
-    body_samples,
+from fcm_fsi.fcm.hidden import body_samples
+from fcm_fsi.fcm.hidden_graph import (
     chain_conductance,
     hidden_pressure,
     interpolate_hidden,
@@ -202,6 +202,15 @@ def test_large_hidden_patches_are_solved_by_cg_to_the_direct_solution(monkeypatc
     shared = hidden_module.LaplaceSolver(MPI.COMM_WORLD)
     monkeypatch.setattr(hidden_module, "DIRECT_LIMIT", 5000)
     np.testing.assert_array_equal(interpolate_hidden(hidden, values, C, shared), amg)
+    # the same graph extended again (a later pass): the operator is kept as it is, which gives the
+    # solve of an operator set anew from an equal matrix, to the bit
+    graph = hidden_module.HiddenGraph(hidden, C2)
+    kept, reset = hidden_module.LaplaceSolver(), hidden_module.LaplaceSolver()
+    for solver_ in (kept, reset):
+        graph.extend(values, solver_)
+    again = graph.extend(values2, kept)
+    assert kept._source is graph.L
+    np.testing.assert_array_equal(again, hidden_module.HiddenGraph(hidden, C2).extend(values2, reset))
 
 
 def resting_block(pose: str, refine: int = 1) -> dict:
