@@ -12,7 +12,9 @@ tube of diameter W: the factor is the correction's size, not a fit to this geome
 u_∞ and the corrected value are reported).
 
 Measured terminal velocity: the mean of −v_z over the last ``WINDOW`` of the run; its drift
-over that window (how far the sphere still is from terminal) is reported beside it.
+over that window (how far the sphere still is from terminal) must stay below ``MAX_DRIFT``.
+The full level (d/6) holds the velocity to ``TOLERANCE``; the quick level (d/4) reports it and
+checks that the run completes at a terminal state with the exchange intact.
 """
 from __future__ import annotations
 
@@ -25,6 +27,12 @@ from .coupled import case_at_level, run_coupled
 
 #: fraction of the run at its end over which the terminal velocity is averaged
 WINDOW = 0.2
+#: the terminal velocity's tolerance against the wall-corrected correlation (full level)
+TOLERANCE = 0.05
+#: largest relative change of the velocity over the window for the state to count as terminal:
+#: the window's mean then lies within about half of it, a fifth of the tolerance, from the
+#: velocity at the window's end
+MAX_DRIFT = 0.4 * TOLERANCE
 
 
 def schiller_naumann_cd(re: float) -> float:
@@ -86,19 +94,24 @@ def settling_sphere(level, out_dir: Path, comm) -> list[Metric]:
     t, v = series["t"], -series["b0_vz"]
     window = t >= t[-1] * (1.0 - WINDOW)
     u_end = float(v[window].mean()) if failure is None else float("nan")
-    drift = float((v[window][-1] - v[window][0]) / v[window].mean())
+    drift = float((v[window][-1] - v[window][0]) / v[window].mean()) if failure is None else float("nan")
     re_end = data["fluid"]["density"] * u_end * ref["d"] / data["fluid"]["viscosity"]
     if comm.rank == 0:
         _plot(out_dir, t, v, ref, u_end, t[window][0])
     cells = data["mesh"]["refine"][-1]["size"]
-    return [rel_error_metric("terminal_velocity_rel_error", u_end, ref["u_t"], 0.05, unit="m/s"),
+    if level == "full":
+        accuracy = rel_error_metric("terminal_velocity_rel_error", u_end, ref["u_t"], TOLERANCE, unit="m/s")
+    else:
+        accuracy = report_only("terminal_velocity_rel_error", (u_end - ref["u_t"]) / ref["u_t"], reference=ref["u_t"],
+                               note=f"d/4 cells: the cut wall's excess drag, first order in h, is larger than the "
+                                    f"{TOLERANCE:.0%} the full level (d/6) is held to; reported, not checked")
+    return [accuracy,
             report_only("terminal_velocity_unbounded_rel_error", (u_end - ref["u_inf"]) / ref["u_inf"],
                         reference=ref["u_inf"], note="against the correlation without the wall factor"),
             report_only("wall_factor", ref["wall_factor"], note=f"Di Felice, λ = d/W = {ref['d'] / ref['width']:.3g}"),
             report_only("particle_reynolds", re_end, reference=ref["re"] * ref["wall_factor"],
                         note="ρ u d/μ at the measured terminal velocity"),
-            report_only("window_drift", drift, note=f"relative change of the velocity over the last {WINDOW:.0%} "
-                                                    "of the run (0 = terminal)"),
+            at_most("window_drift", abs(drift), MAX_DRIFT),
             at_most("exchange_error", float(series["exchange_error"].max()), 1e-10),
             report_only("wall_seconds", wall, note=f"column cells {cells} m = d/{ref['d'] / cells:.2g}, "
                                                    f"t_end {data['run']['t_end']} s, {comm.size} rank(s)"
