@@ -53,7 +53,7 @@ def build_model(case: Case, comm, out: Path, restart: str | None, case_dir: Path
         return CoupledModel(case, comm, case_dir, out_dir=out)
     if physics == "pd":
         from .simulation.pd_model import PDModel
-        return PDModel(case, comm, out)
+        return PDModel(case, comm, out, case_dir)
     from .simulation.dem_model import DEMModel
     return DEMModel(case, comm, out, restart=restart is not None)
 

@@ -1,6 +1,7 @@
-"""Peridynamic solids (section ``pd``; docs/peridynamics.md): bond-based PD in the dual-horizon
-form on a regular lattice, explicit velocity-Verlet time integration, bonds breaking at the
-critical stretch of the fracture energy G0."""
+"""Peridynamic solids (section ``pd``; docs/peridynamics.md): bond-based or ordinary state-based PD
+in the dual-horizon form, on a regular lattice or at the centroids of a gmsh tetrahedral mesh,
+explicit velocity-Verlet time integration, bonds breaking at the critical stretch of the
+fracture energy G0."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,6 +11,7 @@ from .fields import param
 from .loader import ConfigError
 
 Formulation = Literal["plane_stress", "plane_strain", "3d"]
+Model = Literal["bond_based", "state_based"]
 
 #: the Poisson ratio a bond-based material has (seed §2 after eq 4): 1/3 in plane stress, 1/4 otherwise
 BOND_BASED_POISSON = {"plane_stress": 1.0 / 3.0, "plane_strain": 0.25, "3d": 0.25}
@@ -30,11 +32,12 @@ def _box_check(key: str, lower: tuple, upper: tuple, dim: int | None = None) -> 
 
 @dataclass(frozen=True, kw_only=True)
 class PDMaterialConfig:
-    """Isotropic linear-elastic brittle material of a bond-based body."""
+    """Isotropic linear-elastic brittle material of a peridynamic body."""
 
     youngs_modulus: float = param(unit="Pa", doc="Young's modulus E (eq 4)", gt=0)
     poisson_ratio: float | None = param(None, doc="Poisson's ratio ν; bond-based PD fixes it (1/3 plane stress, "
-                                                  "1/4 plane strain and 3D): if given it must be that value",
+                                                  "1/4 plane strain and 3D): if given it must be that value; "
+                                                  "state-based PD needs it (any value in the range)",
                                         gt=0, lt=0.5)
     density: float = param(unit="kg/m^3", doc="mass density ρ0 (eq 11)", gt=0)
     fracture_energy: float | None = param(None, unit="J/m^2", doc="fracture energy G0 (mean over the bonds with a "
@@ -60,6 +63,40 @@ class PDLatticeConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
+class PDParticlesConfig:
+    """Material points at the centroids of the tetrahedra of a gmsh mesh (seed §4), each with its
+    tetrahedron's volume V; the local spacing h of a point is the cube root of the mean V of the
+    points within horizon_factor × V^(1/3), and its horizon δ = horizon_factor × h. Either a .msh
+    file or a box that gmsh meshes."""
+
+    file: str | None = param(None, doc="gmsh .msh file with tetrahedra (relative to the case file); null: "
+                                       "mesh the box lower … upper")
+    lower: tuple[float, ...] | None = param(None, unit="m", doc="lower corner of the box gmsh meshes (x, y, z)")
+    upper: tuple[float, ...] | None = param(None, unit="m", doc="upper corner of the box gmsh meshes")
+    size: float | None = param(None, unit="m", doc="target tetrahedron edge length of the box mesh (the particle "
+                                                   "spacing h ≈ V^(1/3) comes out ≈ 0.6 × size)", gt=0)
+
+    def __post_init__(self) -> None:
+        box = (self.lower, self.upper, self.size)
+        if self.file is not None and any(v is not None for v in box):
+            raise ConfigError("key 'pd.particles': give either 'file' or the box ('lower', 'upper', 'size'), "
+                              "not both")
+        if self.file is None and any(v is None for v in box):
+            raise ConfigError("key 'pd.particles': give 'file' (a .msh) or all of 'lower', 'upper', 'size' "
+                              "(a box gmsh meshes)")
+        if self.file is None:
+            _box_check("pd.particles", self.lower, self.upper, 3)
+            extent = [b - a for a, b in zip(self.lower, self.upper)]
+            cells = 5.0 * extent[0] * extent[1] * extent[2] / self.size ** 3    # gmsh: ≈ 5 tets per size³
+            if self.size > min(extent):
+                raise ConfigError(f"key 'pd.particles.size' = {self.size:g} m is larger than the box's smallest "
+                                  f"extent {min(extent):g} m")
+            if cells > MAX_POINTS:
+                raise ConfigError(f"key 'pd.particles.size' = {self.size:g} m gives ≈ {cells:.3g} tetrahedra; "
+                                  f"allowed ≤ {MAX_POINTS:.0e}")
+
+
+@dataclass(frozen=True, kw_only=True)
 class PDVelocityConfig:
     """Prescribed velocity of the points inside a box (e.g. the grips of a tension test)."""
 
@@ -78,7 +115,8 @@ class PDTractionConfig:
     upper: tuple[float, ...] = param(unit="m", doc="upper corner of the boundary layer")
     traction: tuple[float, ...] = param(unit="Pa", doc="traction vector t (force per boundary area)")
     layer_thickness: float | None = param(None, unit="m", doc="thickness h of the layer (default: one lattice "
-                                                              "spacing Δx)", gt=0)
+                                                              "spacing Δx; particles: the mean local spacing "
+                                                              "of the layer's points)", gt=0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -109,16 +147,20 @@ class PDNotchConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class PDConfig:
-    """A peridynamic solid: bond-based, dual-horizon (eqs 2–4, 9–11 of the seed paper)."""
+    """A peridynamic solid in the dual-horizon form (eqs 2–11 of the seed paper)."""
 
-    model: Literal["bond_based"] = param("bond_based", doc="constitutive model (eq 3)")
+    model: Model = param("bond_based", doc="constitutive model: bond_based (eqs 3–4) or state_based (ordinary "
+                                           "state-based, eqs 5–8; 3d only)")
     formulation: Formulation = param(doc="plane_stress, plane_strain (2D, lattice in x, y) or 3d (eq 4)")
     thickness: float = param(1.0, unit="m", doc="out-of-plane thickness of a 2D body (point volume Δx² × "
                                                 "thickness)", gt=0)
     material: PDMaterialConfig = param(doc="elastic and fracture properties")
-    lattice: PDLatticeConfig = param(doc="the body's material points")
-    horizon_factor: float = param(3.015, doc="horizon δ = horizon_factor × Δx (the seed uses 3.015–4.015)",
-                                  ge=1.0, le=10.0)
+    lattice: PDLatticeConfig | None = param(None, doc="the body's material points on a regular lattice (or "
+                                                      "particles)")
+    particles: PDParticlesConfig | None = param(None, doc="the body's material points at the centroids of a "
+                                                          "tetrahedral mesh (3d; or lattice)")
+    horizon_factor: float = param(3.015, doc="horizon δ = horizon_factor × local spacing (Δx, or a "
+                                             "particle's h ≈ V^(1/3); the seed uses 3.015–4.015)", ge=1.0, le=10.0)
     dt: float = param(unit="s", doc="time step of the velocity-Verlet integration (eq 11); refused above the "
                                     "stable step (Silling–Askari bound, the log states it)", gt=0)
     velocities: tuple[PDVelocityConfig, ...] = param((), doc="prescribed velocities on regions")
@@ -133,10 +175,43 @@ class PDConfig:
 
     @property
     def horizon(self) -> float:
-        """δ [m]."""
+        """δ [m] of a lattice body (particles have one per point)."""
+        if self.lattice is None:
+            raise ValueError("a particle body has a horizon per point (pd/particles.py)")
         return self.horizon_factor * self.lattice.spacing
 
     def __post_init__(self) -> None:
+        if (self.lattice is None) == (self.particles is None):
+            raise ConfigError("keys 'pd.lattice' and 'pd.particles': give exactly one (a regular lattice, or the "
+                              f"centroids of a tetrahedral mesh); got {'both' if self.lattice else 'neither'}")
+        if self.particles is not None and self.formulation != "3d":
+            raise ConfigError(f"key 'pd.formulation' = {self.formulation!r}: pd.particles are the centroids of "
+                              "tetrahedra; allowed: '3d'")
+        if self.model == "state_based":
+            self._check_state_based()
+        else:
+            self._check_bond_based_poisson()
+        if self.lattice is not None:
+            self._check_lattice()
+        self._check_loads()
+
+    def _check_state_based(self) -> None:
+        if self.formulation != "3d":
+            raise ConfigError(f"key 'pd.formulation' = {self.formulation!r}: model state_based is built in 3D "
+                              "(eq 6); allowed: '3d'")
+        if self.material.poisson_ratio is None:
+            raise ConfigError("key 'pd.material.poisson_ratio' is required with pd.model = 'state_based' "
+                              "(allowed 0 < ν < 0.5)")
+
+    def _check_bond_based_poisson(self) -> None:
+        nu = self.material.poisson_ratio
+        fixed = BOND_BASED_POISSON[self.formulation]
+        if nu is not None and abs(nu - fixed) > 1e-9:
+            raise ConfigError(f"key 'pd.material.poisson_ratio' = {nu:g}: bond-based PD in {self.formulation} has "
+                              f"ν = {fixed:.6g}; allowed: {fixed:.6g} or null (any ν with pd.model = "
+                              "'state_based')")
+
+    def _check_lattice(self) -> None:
         dim = self.dim
         lat = self.lattice
         _box_check("pd.lattice", lat.lower, lat.upper, dim)
@@ -150,11 +225,9 @@ class PDConfig:
         if points > MAX_POINTS:
             raise ConfigError(f"key 'pd.lattice.spacing' = {lat.spacing:g} m gives ≈ {points:.3g} points; allowed "
                               f"≤ {MAX_POINTS:.0e}")
-        nu = self.material.poisson_ratio
-        fixed = BOND_BASED_POISSON[self.formulation]
-        if nu is not None and abs(nu - fixed) > 1e-9:
-            raise ConfigError(f"key 'pd.material.poisson_ratio' = {nu:g}: bond-based PD in {self.formulation} has "
-                              f"ν = {fixed:.6g}; allowed: {fixed:.6g} or null")
+
+    def _check_loads(self) -> None:
+        dim = self.dim
         for i, v in enumerate(self.velocities):
             _box_check(f"pd.velocities[{i}]", v.lower, v.upper, dim)
             if len(v.velocity) != dim or all(c is None for c in v.velocity):

@@ -1,5 +1,7 @@
-"""Peridynamic solids (docs/peridynamics.md): bond-based PD in the dual-horizon form (eqs 2–4,
-9–11 of the seed paper). ``material``: micromodulus, critical stretch, Weibull G0, volume
-correction, stable step; ``lattice``: points; ``neighbours``: bonds by cell binning and the
-pre-notch filter; ``forces``: the bond kernels; ``system``: the state and the velocity-Verlet
-step; ``output``: particles for ParaView. Each Numba kernel has a NumPy twin (``reference.py``)."""
+"""Peridynamic solids (docs/peridynamics.md): bond-based and ordinary state-based PD in the
+dual-horizon form (eqs 2–11 of the seed paper). ``material``: micromodulus, K and G, influence,
+weighted volume, critical stretch, Weibull G0, volume correction, stable step; ``lattice`` and
+``particles`` (tetrahedron centroids): points; ``neighbours``: bonds by cell binning and the
+pre-notch filter; ``forces``: the bond-based kernels; ``state``: the state-based kernels;
+``system``: the laws, the state and the velocity-Verlet step; ``builder``: a body from the case.
+Each Numba kernel has a NumPy twin (``reference.py``)."""

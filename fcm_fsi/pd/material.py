@@ -1,4 +1,5 @@
-"""Bond-based material constants of the dual-horizon form (seed paper eqs 4 and 10), the volume
+"""Material constants of the dual-horizon form: bond-based (seed paper eqs 4 and 10) and ordinary
+state-based (eqs 6–8: K, G, influence ω, weighted volume m, critical stretch), the volume
 correction of the bonds near the horizon's edge, G0 per bond from a Weibull distribution and the
 stable time step.
 
@@ -75,11 +76,56 @@ def stable_time_step(density, vol, owner, nbr, length, beta, modulus) -> float:
     the dual form: the bond owned by i (C_i) and the one owned by j (C_j). Arrays per owned bond
     (``owner``, ``nbr``, ``length`` |ξ|, ``beta``) and per point (``density``, ``vol``,
     ``modulus`` C)."""
+    return verlet_bound(density, vol, owner, nbr, modulus[owner] * beta / length)
+
+
+def verlet_bound(density, vol, owner, nbr, bond_stiffness) -> float:
+    """min_i √(2ρ_i / Σ_j V_j k_ij) [s] with k of each owned bond (its force density per unit
+    extension and neighbour volume, N/m⁶ per m) counted at both ends of the pair."""
     n = len(vol)
-    k = modulus[owner] * beta / length
+    k = bond_stiffness
     stiff = np.bincount(owner, weights=k * vol[nbr], minlength=n) + np.bincount(nbr, weights=k * vol[owner],
                                                                                  minlength=n)
     bonded = stiff > 0
     if not bonded.any():
         return math.inf
     return float(np.sqrt(2.0 * np.asarray(density * np.ones(n))[bonded] / stiff[bonded]).min())
+
+
+# ------------------------------------------------------------------ ordinary state-based (eqs 5–8)
+def bulk_and_shear(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
+    """K = E / (3(1 − 2ν)), G = E / (2(1 + ν)) [Pa] (3D isotropic)."""
+    return youngs_modulus / (3.0 * (1.0 - 2.0 * poisson_ratio)), youngs_modulus / (2.0 * (1.0 + poisson_ratio))
+
+
+def influence(length, horizon):
+    """ω⟨ξ⟩ = exp(−|ξ|²/δ²) of eq 8 (Gaussian; δ the owner's horizon) [-]."""
+    length, horizon = np.asarray(length, float), np.asarray(horizon, float)
+    return np.exp(-(length / horizon) ** 2)
+
+
+def weighted_volume(owner, nbr, length, beta, omega, vol, n: int) -> np.ndarray:
+    """m_i = Σ_j ω |ξ|² β V_j over the bonds i owns (eq 7, discrete) [m⁵], in the reference
+    configuration with all bonds (constant in time)."""
+    return np.bincount(owner, weights=omega * length * length * beta * vol[nbr], minlength=n)
+
+
+def state_critical_stretch(bulk, shear, fracture_energy, horizon):
+    """s0 of a state-based bond [-]: √(G0 / ((3G + (3/4)⁴ (K − 5G/3)) δ)) (Madenci & Oterkus 2014,
+    3D ordinary state-based; the seed's eq 10 gives only the bond-based values). At ν = 1/4
+    (K = 5G/3) it is the bond-based 3D value √(5G0/(6Eδ))."""
+    bulk, shear = np.asarray(bulk, float), np.asarray(shear, float)
+    stiff = 3.0 * shear + 0.75 ** 4 * (bulk - 5.0 * shear / 3.0)
+    return np.sqrt(np.asarray(fracture_energy, float) / (stiff * np.asarray(horizon, float)))
+
+
+def state_bond_stiffness(bulk, shear, omega, mvol):
+    """Equivalent bond stiffness k = (15G + 3|3K − 5G|) ω / m [N/m⁶ per m] of a state-based bond for
+    the Silling–Askari bound (:func:`verlet_bound`). The force state of eq 6 is
+    t = (15G/m) ω e + ((3K − 5G)/m) ω |ξ| θ: the first term is a pair spring (the whole model at
+    ν = 1/4, where the bound is then exactly the bond-based one); the second couples the bond to
+    the dilatation θ = (3/m) Σ ω |ξ| e V of its owner, whose row sum is ≈ 3|3K − 5G| ω/m (exactly
+    for a bond of the family's mean weighted length). The resulting bound is 0.41–0.47 of the
+    exact limit 2/ω_max (tests/pd/test_state.py). ``bulk``, ``shear``, ``mvol`` per owner of the
+    bond, ``omega`` per bond."""
+    return (15.0 * shear + 3.0 * np.abs(3.0 * bulk - 5.0 * shear)) * omega / mvol

@@ -71,3 +71,44 @@ def damage(offsets, nbr, beta, intact, vol):
     whole = np.bincount(owner, weights=beta * vol[nbr], minlength=n)
     kept = np.bincount(owner, weights=beta * vol[nbr] * intact, minlength=n)
     return np.where(whole > 0, 1.0 - kept / np.where(whole > 0, whole, 1.0), 0.0)
+
+
+def _state_sums(y, owner, nbr, length, beta, omega, live, vol, n):
+    e = np.linalg.norm(y[nbr] - y[owner], axis=1) - length
+    w = np.where(live, omega * beta * vol[nbr], 0.0)
+    return (np.bincount(owner, weights=w * e * e, minlength=n), np.bincount(owner, weights=w * length * e, minlength=n),
+            np.bincount(owner, weights=w * length * length, minlength=n)), e
+
+
+def _state_energy(bulk, shear, m, sums):
+    s_ee, s_ex, s_xx = sums
+    safe = np.where(m > 0, m, 1.0)
+    theta = np.where(m > 0, 3.0 * s_ex / safe, 0.0)
+    dev = s_ee - 2.0 * theta / 3.0 * s_ex + theta ** 2 / 9.0 * s_xx
+    return np.where(m > 0, 0.5 * bulk * theta ** 2 + 7.5 * shear / safe * dev, 0.0), theta
+
+
+def state_update(y, offsets, nbr, length, beta, omega, s0, intact, vol, mvol, bulk, shear, theta):
+    n = len(offsets) - 1
+    owner = np.repeat(np.arange(n), np.diff(offsets))
+    live = intact == 1
+    before, e = _state_sums(y, owner, nbr, length, beta, omega, live, vol, n)
+    snap = live & (e >= s0 * length) & (mvol[owner] > 0)
+    intact[snap] = 0
+    after, _ = _state_sums(y, owner, nbr, length, beta, omega, intact == 1, vol, n)
+    w0, _ = _state_energy(bulk, shear, mvol, before)
+    w1, theta[:] = _state_energy(bulk, shear, mvol, after)
+    return w1 * vol, (w0 - w1) * vol
+
+
+def state_force_density(y, offsets, nbr, dual_offsets, dual_bond, owner, length, beta, omega, intact, vol, mvol,
+                        theta, bulk, shear, out):
+    d = y[nbr] - y[owner]
+    r = np.linalg.norm(d, axis=1)
+    e = r - length
+    p = owner
+    t = omega * ((3.0 * bulk[p] - 5.0 * shear[p]) * theta[p] * length + 15.0 * shear[p] * e) / mvol[p]
+    g = (t * beta * intact)[:, None] * d / r[:, None]
+    out[:] = 0.0
+    np.add.at(out, owner, g * vol[nbr][:, None])
+    np.add.at(out, nbr, -g * vol[owner][:, None])

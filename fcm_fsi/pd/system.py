@@ -1,6 +1,7 @@
 """The state of a peridynamic body and its velocity-Verlet step (eq 11), with the energy
-account: kinetic, elastic (intact bonds), dissipated (bonds' energy when they broke) and the
-work of the boundary loads (prescribed velocities and tractions)."""
+account: kinetic, elastic (intact bonds), dissipated (the elastic energy the breaks released)
+and the work of the boundary loads (prescribed velocities and tractions). The constitutive
+model is a small object: :class:`BondBased` (eqs 3–4) or :class:`StateBased` (eqs 5–8)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -8,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .forces import break_bonds, damage, force_density
+from .state import state_force_density, state_update
 
 
 @dataclass
@@ -40,14 +42,52 @@ class Loads:
     body_force: np.ndarray
 
 
-class PDSystem:
-    """Points ``x`` (N, 3) [m] with volumes ``vol`` [m³], ``density`` ρ0 [kg/m³], micromodulus
-    ``modulus`` C(δ_p) (eq 4), their ``bonds`` and ``loads``, stepped by ``dt`` [s]."""
+class BondBased:
+    """Bond-based law (eq 3): micromodulus ``modulus`` C(δ_p) per point (eq 4)."""
 
-    def __init__(self, x, vol, density: float, modulus, bonds: Bonds, loads: Loads, dt: float,
-                 velocity: np.ndarray | None = None):
-        self.x, self.vol, self.rho, self.modulus = x, vol, float(density), modulus
-        self.bonds, self.loads, self.dt = bonds, loads, float(dt)
+    name = "bond_based"
+
+    def __init__(self, modulus: np.ndarray):
+        self.modulus = modulus
+
+    def update(self, y: np.ndarray, b: Bonds, vol: np.ndarray, f: np.ndarray) -> tuple[float, float]:
+        """Break the bonds past s0, then the force density at ``y`` into ``f``; returns (elastic
+        energy, energy released by the breaks) [J]."""
+        elastic, released = break_bonds(y, b.offsets, b.nbr, b.length, b.beta, b.s0, b.intact, self.modulus, vol)
+        force_density(y, b.offsets, b.nbr, b.dual_offsets, b.dual_bond, b.owner, b.length, b.beta, b.intact,
+                      self.modulus, vol, f)
+        return float(elastic.sum()), float(released.sum())
+
+
+class StateBased:
+    """Ordinary state-based law (eqs 5–8, 3D): influence ``omega`` ω per bond (eq 8), weighted
+    volume ``mvol`` m per point (eq 7), ``bulk`` K and ``shear`` G [Pa] per point; the dilatation
+    ``theta`` θ per point of the last update."""
+
+    name = "state_based"
+
+    def __init__(self, omega: np.ndarray, mvol: np.ndarray, bulk: np.ndarray, shear: np.ndarray):
+        self.omega, self.mvol, self.bulk, self.shear = omega, mvol, bulk, shear
+        self.theta = np.zeros(len(mvol))
+
+    def update(self, y: np.ndarray, b: Bonds, vol: np.ndarray, f: np.ndarray) -> tuple[float, float]:
+        """As :meth:`BondBased.update`: breaks, θ, then the force density of eq 6."""
+        elastic, released = state_update(y, b.offsets, b.nbr, b.length, b.beta, self.omega, b.s0, b.intact, vol,
+                                         self.mvol, self.bulk, self.shear, self.theta)
+        state_force_density(y, b.offsets, b.nbr, b.dual_offsets, b.dual_bond, b.owner, b.length, b.beta, self.omega,
+                            b.intact, vol, self.mvol, self.theta, self.bulk, self.shear, f)
+        return float(elastic.sum()), float(released.sum())
+
+
+class PDSystem:
+    """Points ``x`` (N, 3) [m] with volumes ``vol`` [m³], ``density`` ρ0 [kg/m³], the constitutive
+    ``law`` (:class:`BondBased` or :class:`StateBased`), their ``bonds`` and ``loads``, stepped by
+    ``dt`` [s]; ``horizon`` δ per point [m]."""
+
+    def __init__(self, x, vol, density: float, law: BondBased | StateBased, bonds: Bonds, loads: Loads, dt: float,
+                 velocity: np.ndarray | None = None, horizon: np.ndarray | None = None):
+        self.x, self.vol, self.rho, self.law = x, vol, float(density), law
+        self.bonds, self.loads, self.dt, self.horizon = bonds, loads, float(dt), horizon
         n = len(x)
         self.u = np.zeros((n, 3))
         self.v = np.zeros((n, 3)) if velocity is None else velocity.copy()
@@ -59,17 +99,16 @@ class PDSystem:
         self.power = self._power()
         self.initial_energy = self.kinetic() + self.elastic
 
+    @property
+    def modulus(self) -> np.ndarray:
+        """C(δ_p) of a bond-based body (eq 4)."""
+        return self.law.modulus
+
     # ------------------------------------------------------------ the step
     def _update_bonds(self) -> None:
         """Break the bonds past s0, then the force density at the current positions."""
-        b = self.bonds
-        y = self.x + self.u
-        elastic, released = break_bonds(y, b.offsets, b.nbr, b.length, b.beta, b.s0, b.intact, self.modulus,
-                                        self.vol)
-        self.elastic = float(elastic.sum())
-        self.dissipated += float(released.sum())
-        force_density(y, b.offsets, b.nbr, b.dual_offsets, b.dual_bond, b.owner, b.length, b.beta, b.intact,
-                      self.modulus, self.vol, self.f)
+        self.elastic, released = self.law.update(self.x + self.u, self.bonds, self.vol, self.f)
+        self.dissipated += released
 
     def _kick(self) -> None:
         """Half a step of acceleration (ρ0 ü = f + b, eq 11); prescribed components keep their velocity."""

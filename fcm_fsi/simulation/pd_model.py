@@ -37,14 +37,14 @@ class PDModel:
     series_units = {"kinetic_energy": "J", "elastic_energy": "J", "dissipated_energy": "J", "external_work": "J",
                     "energy_balance": "J", "broken_bonds": "-", "broken_fraction": "-", "max_damage": "-"}
 
-    def __init__(self, case: Case, comm: MPI.Comm, out_dir: Path) -> None:
+    def __init__(self, case: Case, comm: MPI.Comm, out_dir: Path, case_dir: Path | None = None) -> None:
         self.case, self.comm, self.out = case, comm, Path(out_dir)
-        self.system = build_system(case.pd)
+        self.system = build_system(case.pd, case_dir)
         self.pvd: list[tuple[float, str]] = []
         s = self.system
-        log.info("pd: %s %s, %d points, %d bonds, δ = %.4g m (%.4g Δx), dt = %.4g s, %d steps per loop step",
-                 case.pd.model, case.pd.formulation, len(s.x), s.bonds.count, case.pd.horizon,
-                 case.pd.horizon_factor, case.pd.dt, self._steps(case.run.dt))
+        log.info("pd: %s %s, %d points, %d bonds, δ = %.4g … %.4g m (%.4g × spacing), dt = %.4g s, %d steps per "
+                 "loop step", case.pd.model, case.pd.formulation, len(s.x), s.bonds.count, s.horizon.min(),
+                 s.horizon.max(), case.pd.horizon_factor, case.pd.dt, self._steps(case.run.dt))
 
     def _steps(self, dt: float) -> int:
         n = max(round(dt / self.case.pd.dt), 1)
