@@ -17,7 +17,8 @@ from .material import (
     volume_correction,
     weibull_fracture_energy,
 )
-from .neighbours import bond_lists, compress, notch_array, notch_keep, transpose
+from .loads import PressureLoad, wall_force_per_pascal, wall_layer
+from .neighbours import bond_lists, compress, hole_keep, notch_array, notch_keep, transpose
 from .system import Bonds, Loads, PDSystem
 
 
@@ -35,6 +36,8 @@ def build_bonds(cfg: PDConfig, x: np.ndarray, horizon: np.ndarray, spacing: np.n
     if cfg.notches:
         keep = notch_keep(x, offsets, nbr, notch_array([n.points for n in cfg.notches], cfg.dim))
         offsets, nbr = compress(offsets, nbr, keep)
+    for hole in cfg.boreholes:
+        offsets, nbr = compress(offsets, nbr, hole_keep(x, offsets, nbr, hole.centre, hole.radius))
     owner = np.repeat(np.arange(len(x), dtype=np.int64), np.diff(offsets))
     length = np.linalg.norm(x[nbr] - x[owner], axis=1)
     beta = volume_correction(length, horizon[owner], spacing[owner])
@@ -48,7 +51,31 @@ def build_bonds(cfg: PDConfig, x: np.ndarray, horizon: np.ndarray, spacing: np.n
     return Bonds(offsets, nbr, owner, dual_offsets, dual_bond, length, beta, s0, np.ones(len(nbr), np.uint8))
 
 
-def build_loads(cfg: PDConfig, x: np.ndarray) -> Loads:
+def body_points(cfg: PDConfig) -> np.ndarray:
+    """The lattice of ``cfg`` without the points inside its boreholes (|x − c| < R)."""
+    x = lattice_points(cfg.lattice.lower, cfg.lattice.upper, cfg.lattice.spacing)
+    for i, hole in enumerate(cfg.boreholes):
+        inside = np.hypot(x[:, 0] - hole.centre[0], x[:, 1] - hole.centre[1]) < hole.radius
+        if not inside.any():
+            raise ConfigError(f"key 'pd.boreholes[{i}].radius' = {hole.radius:g} m: the hole holds no lattice point "
+                              f"(spacing {cfg.lattice.spacing:g} m); allowed: a hole that removes at least one point")
+        x = x[~inside]
+    return x
+
+
+def borehole_loads(cfg: PDConfig, x: np.ndarray, vol: np.ndarray) -> tuple[PressureLoad, ...]:
+    """The blast pressure of every borehole on its wall layer (``loads.py``)."""
+    out = []
+    for i, hole in enumerate(cfg.boreholes):
+        pts = wall_layer(x, hole.centre, hole.radius, cfg.lattice.spacing)
+        if len(pts) == 0:
+            raise ConfigError(f"key 'pd.boreholes[{i}]': no lattice point lies within one spacing of the wall")
+        force = wall_force_per_pascal(x, vol, pts, hole.centre, hole.radius, cfg.thickness)
+        out.append(PressureLoad(pts, force, hole.peak_pressure, hole.rise_time, hole.beta_over_alpha))
+    return tuple(out)
+
+
+def build_loads(cfg: PDConfig, x: np.ndarray, vol: np.ndarray | None = None) -> Loads:
     n, dim = len(x), cfg.dim
     fixed, fixed_velocity, body = np.zeros((n, 3), bool), np.zeros((n, 3)), np.zeros((n, 3))
     for i, bc in enumerate(cfg.velocities):
@@ -65,7 +92,8 @@ def build_loads(cfg: PDConfig, x: np.ndarray) -> Loads:
             raise ConfigError(f"key 'pd.tractions[{i}]': the region holds no lattice point")
         h = tr.layer_thickness or cfg.lattice.spacing
         body[sel, :dim] += np.asarray(tr.traction, float) / h
-    return Loads(fixed, fixed_velocity, body)
+    vol = point_volumes(cfg, n) if vol is None else vol
+    return Loads(fixed, fixed_velocity, body, borehole_loads(cfg, x, vol))
 
 
 def initial_velocity(cfg: PDConfig, x: np.ndarray) -> np.ndarray:
@@ -86,7 +114,7 @@ def initial_velocity(cfg: PDConfig, x: np.ndarray) -> np.ndarray:
 
 def build_system(cfg: PDConfig) -> PDSystem:
     """The body of ``cfg``; refuses ``pd.dt`` above the stable step (ConfigError naming the bound)."""
-    x = lattice_points(cfg.lattice.lower, cfg.lattice.upper, cfg.lattice.spacing)
+    x = body_points(cfg)
     n = len(x)
     spacing = np.full(n, cfg.lattice.spacing)
     horizon = cfg.horizon_factor * spacing                     # δ per point (dual horizon, eq 2)
@@ -97,7 +125,7 @@ def build_system(cfg: PDConfig) -> PDSystem:
     bonds = build_bonds(cfg, x, horizon, spacing)
     dt_crit = stable_time_step(mat.density, vol, bonds.owner, bonds.nbr, bonds.length, bonds.beta, modulus)
     check_time_step(cfg.dt, dt_crit)
-    return PDSystem(x, vol, mat.density, modulus, bonds, build_loads(cfg, x), cfg.dt, initial_velocity(cfg, x))
+    return PDSystem(x, vol, mat.density, modulus, bonds, build_loads(cfg, x, vol), cfg.dt, initial_velocity(cfg, x))
 
 
 def check_time_step(dt: float, dt_crit: float) -> None:
