@@ -9,6 +9,7 @@ import numpy as np
 from ..config.loader import ConfigError
 from ..config.pd import BOND_BASED_POISSON, PDConfig
 from .lattice import in_box, lattice_points
+from .loads import PressureLoad, wall_force_per_pascal, wall_layer
 from .material import (
     critical_stretch,
     family_radius,
@@ -17,7 +18,6 @@ from .material import (
     volume_correction,
     weibull_fracture_energy,
 )
-from .loads import PressureLoad, wall_force_per_pascal, wall_layer
 from .neighbours import bond_lists, compress, hole_keep, notch_array, notch_keep, transpose
 from .system import Bonds, Loads, PDSystem
 
