@@ -212,5 +212,6 @@ class PDConfig:
         for a, (c, lo, hi) in enumerate(zip(h.centre, lat.lower, lat.upper)):
             if c - reach < lo or c + reach > hi:
                 raise ConfigError(f"key '{key}': the hole and its wall layer (radius {h.radius:g} m + Δx = "
-                                  f"{reach:g} m around {list(h.centre)}) leave the body along axis {a}; allowed: "
-                                  f"centre in [{lo + reach:g}, {hi - reach:g}] m")
+                                  f"{reach:g} m around {list(h.centre)}) leave the body ('pd.lattice.lower' = "
+                                  f"{list(lat.lower)}, 'pd.lattice.upper' = {list(lat.upper)}) along axis {a}; "
+                                  f"allowed: centre in [{lo + reach:g}, {hi - reach:g}] m")

@@ -211,11 +211,11 @@ def pd_borehole_blast(level, out_dir: Path, comm) -> list:
     Checks: the P-wave speed, the least-squares slope of the arrival times (half the first peak
     of the radial velocity) at six probes on the x axis, within 3 % of the lattice's long-wave
     speed √(C11_lattice/ρ) (closed form; lower levels run ahead of it, the lattice's dispersion
-    spreads the foot of the front); a crushed zone (a ring around the wall with half its points
-    cracked) by 11.25 µs and no radial crack beyond it at 1.25 µs (the seed's Fig. 4
-    description); cracks not growing faster than the Rayleigh speed; the energy balance
-    K + W + D − work within 5 % of the work (first order in dt: pd_energy). The number and length
-    of the radial cracks are reported: the seed describes several long ones at 11.25 µs, but with
+    spreads the foot of the front); no radial crack at 1.25 µs (the seed's Fig. 4 description);
+    cracks not growing faster than the Rayleigh speed; the energy balance
+    K + W + D − work within 5 % of the work (first order in dt: pd_energy). The crushed zone (the
+    rings around the wall with half their points cracked) and the number and length of the
+    radial cracks are reported: the seed describes both at 11.25 µs, but with
     its numbers (no gas in the cracks) K of a crack a ≈ R long from the hole, ≈ 0.4 P0 √(πR) ≈
     4 MPa√m, is barely above K_c = √(E G0) = 3.2 MPa√m, so cracks arrest within a few R
     (docs/peridynamics.md §3)."""
@@ -252,8 +252,7 @@ def pd_borehole_blast(level, out_dir: Path, comm) -> list:
                     report_only(f"longest_crack_{tag}", (cr[0] if cr else 0.0) * 1e3, "mm",
                                 note="from the crushed zone's edge")]
     metrics += [at_most("radial_cracks_1.25us", len(lengths[SNAPSHOTS[0]]), 0),
-                at_least("crushed_radius_11.25us", radii[SNAPSHOTS[1]] * 1e3, (HOLE_R + spacing) * 1e3, "mm",
-                         reference=None),
+
                 report_only("crushed_radius_static", r_static * 1e3, "mm", note="Lamé hoop strain P0 R²/(2μ r²) "
                             "= mean s0")]
     for ts in SNAPSHOTS[1:]:
@@ -364,7 +363,7 @@ def pd_homalite_branching(level, out_dir: Path, comm) -> list:
     """Bobaru & Zhang's (2016, §5.2) pre-notched Homalite plate as the seed's §3(1): 0.4 × 0.2 m, a
     0.2 m notch from the left edge along mid-height, plane stress bond-based PD (E = 4.55 GPa,
     ρ = 1230 kg/m³, G0 = 38.46 J/m², ν = 1/3), δ = 4.015 Δx, 1 MPa traction on the top and bottom
-    edges from t = 0. Δx = 1 mm (full: the seed's 80,000-point lattice) or 2.5 mm (quick).
+    edges from t = 0. Δx = 1 mm (full: the seed's 80,000-point lattice) or 4 mm (quick).
 
     Measured: the crack tip (the rightmost point with D ≥ 0.35) over time; the crack's start; its
     mean speed between 2δ past the notch tip and the branch point (or the end); the branch point
@@ -374,7 +373,7 @@ def pd_homalite_branching(level, out_dir: Path, comm) -> list:
     speed stays below the Rayleigh speed c_R of the continuum; the energy balance within 5 % of
     the work (first order in dt, pd_energy); the full level: the crack branches before the right
     edge (the seed and Bobaru & Zhang both show branching)."""
-    spacing = 2.5e-3 if level == "quick" else 1.0e-3
+    spacing = 4.0e-3 if level == "quick" else 1.0e-3
     res = homalite_run(spacing, 400e-6, 2.0e-6)
     s, cfg = res["system"], res["cfg"]
     delta = cfg.horizon
@@ -420,7 +419,7 @@ def pd_homalite_branching(level, out_dir: Path, comm) -> list:
                                    "branch point"))
     else:
         metrics.append(report_only("branch_x", x_branch if x_branch is not None else math.nan, "m",
-                                   note="not resolved at δ = 10 mm"))
+                                   note="not resolved at δ = 16 mm"))
     metrics.append(report_only("tip_at_end", tip[-1], "m", note=f"t = {t[-1] * 1e6:.0f} µs"))
 
     def draw(fig):
