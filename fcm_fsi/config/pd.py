@@ -146,6 +146,23 @@ class PDNotchConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
+class PDBoreholeConfig:
+    """A charged borehole in a 2D body (seed §3(2), eq 12): the lattice points inside the circle
+    are removed from the body, no bond crosses it, and the blast pressure
+    P(t) = P0 (e^{−αt} − e^{−βt}) / (e^{−αt0} − e^{−βt0}) pushes its wall radially outward
+    (a body force on the points within one spacing Δx of the wall; docs/peridynamics.md §2)."""
+
+    centre: tuple[float, ...] = param(unit="m", doc="centre of the hole (x, y)")
+    radius: float = param(unit="m", doc="radius of the hole", gt=0)
+    peak_pressure: float = param(unit="Pa", doc="peak pressure P0, reached at the rise time (eq 12)", gt=0,
+                                 le=1.0e11)
+    rise_time: float = param(unit="s", doc="rise time t0: the time of the peak, t0 = ln(β/α)/(β − α) (eq 12)",
+                             gt=0, le=1.0)
+    beta_over_alpha: float = param(doc="β/α of eq 12 (> 1): with t0 it sets the decay rates α and β", gt=1.0,
+                                   le=1.0e3)
+
+
+@dataclass(frozen=True, kw_only=True)
 class PDConfig:
     """A peridynamic solid in the dual-horizon form (eqs 2–11 of the seed paper)."""
 
@@ -168,6 +185,8 @@ class PDConfig:
     initial_velocity: tuple[PDInitialVelocityConfig, ...] = param((), doc="initial velocities (later entries "
                                                                           "override earlier ones)")
     notches: tuple[PDNotchConfig, ...] = param((), doc="pre-notches no bond crosses")
+    boreholes: tuple[PDBoreholeConfig, ...] = param((), doc="2D: pressurised holes (blast pressure of eq 12 on "
+                                                           "the wall; the points inside are removed)")
 
     @property
     def dim(self) -> int:
@@ -250,3 +269,22 @@ class PDConfig:
             if len(n.points) != want or any(len(p) != dim for p in n.points):
                 raise ConfigError(f"key 'pd.notches[{i}].points': give {want} points of {dim} coordinates "
                                   f"({'a segment' if dim == 2 else 'a corner and its two neighbours'})")
+        for i, h in enumerate(self.boreholes):
+            self._check_borehole(i, h)
+
+    def _check_borehole(self, i: int, h: PDBoreholeConfig) -> None:
+        """A hole of a 2D body, with its wall layer (one spacing) inside the lattice box."""
+        key = f"pd.boreholes[{i}]"
+        if self.dim != 2:
+            raise ConfigError(f"key '{key}': boreholes are 2D (plane stress or strain); formulation is "
+                              f"'{self.formulation}'")
+        if len(h.centre) != 2:
+            raise ConfigError(f"key '{key}.centre' = {list(h.centre)}: give 2 coordinates")
+        lat = self.lattice
+        reach = h.radius + lat.spacing
+        for a, (c, lo, hi) in enumerate(zip(h.centre, lat.lower, lat.upper)):
+            if c - reach < lo or c + reach > hi:
+                raise ConfigError(f"key '{key}': the hole and its wall layer (radius {h.radius:g} m + Δx = "
+                                  f"{reach:g} m around {list(h.centre)}) leave the body ('pd.lattice.lower' = "
+                                  f"{list(lat.lower)}, 'pd.lattice.upper' = {list(lat.upper)}) along axis {a}; "
+                                  f"allowed: centre in [{lo + reach:g}, {hi - reach:g}] m")

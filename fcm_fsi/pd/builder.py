@@ -12,6 +12,7 @@ import numpy as np
 from ..config.loader import ConfigError
 from ..config.pd import BOND_BASED_POISSON, PDConfig
 from .lattice import in_box, lattice_points
+from .loads import PressureLoad, wall_force_per_pascal, wall_layer
 from .material import (
     bulk_and_shear,
     critical_stretch,
@@ -25,7 +26,7 @@ from .material import (
     weibull_fracture_energy,
     weighted_volume,
 )
-from .neighbours import bond_lists, compress, notch_array, notch_keep, transpose
+from .neighbours import bond_lists, compress, hole_keep, notch_array, notch_keep, transpose
 from .particles import local_spacing, tet_particles
 from .system import BondBased, Bonds, Loads, PDSystem, StateBased
 
@@ -57,7 +58,7 @@ def build_points(cfg: PDConfig, case_dir: Path | None = None) -> Points:
     relative to ``case_dir``, or a box gmsh meshes), with a horizon per point (eq 2)."""
     if cfg.lattice is not None:
         lat = cfg.lattice
-        x = lattice_points(lat.lower, lat.upper, lat.spacing)
+        x = body_points(cfg)
         spacing = np.full(len(x), lat.spacing)
         lower, upper = np.asarray(lat.lower, float), np.asarray(lat.upper, float)
         return Points(x, point_volumes(cfg, len(x)), spacing, cfg.horizon_factor * spacing, lower, upper, True)
@@ -76,6 +77,8 @@ def build_bonds(cfg: PDConfig, pts: Points) -> Bonds:
     if cfg.notches:
         keep = notch_keep(x, offsets, nbr, notch_array([n.points for n in cfg.notches], cfg.dim))
         offsets, nbr = compress(offsets, nbr, keep)
+    for hole in cfg.boreholes:
+        offsets, nbr = compress(offsets, nbr, hole_keep(x, offsets, nbr, hole.centre, hole.radius))
     owner = np.repeat(np.arange(len(x), dtype=np.int64), np.diff(offsets))
     length = np.linalg.norm(x[nbr] - x[owner], axis=1)
     if pts.partial_volume:
@@ -112,7 +115,31 @@ def build_law(cfg: PDConfig, pts: Points, bonds: Bonds) -> tuple[BondBased | Sta
     return StateBased(omega, mvol, bulk, shear), bonds.beta * state_bond_stiffness(bulk[o], shear[o], omega, mvol[o])
 
 
-def build_loads(cfg: PDConfig, x: np.ndarray, spacing: np.ndarray | None = None) -> Loads:
+def body_points(cfg: PDConfig) -> np.ndarray:
+    """The lattice of ``cfg`` without the points inside its boreholes (|x − c| < R)."""
+    x = lattice_points(cfg.lattice.lower, cfg.lattice.upper, cfg.lattice.spacing)
+    for i, hole in enumerate(cfg.boreholes):
+        inside = np.hypot(x[:, 0] - hole.centre[0], x[:, 1] - hole.centre[1]) < hole.radius
+        if not inside.any():
+            raise ConfigError(f"key 'pd.boreholes[{i}].radius' = {hole.radius:g} m: the hole holds no lattice point "
+                              f"(spacing {cfg.lattice.spacing:g} m); allowed: a hole that removes at least one point")
+        x = x[~inside]
+    return x
+
+
+def borehole_loads(cfg: PDConfig, x: np.ndarray, vol: np.ndarray) -> tuple[PressureLoad, ...]:
+    """The blast pressure of every borehole on its wall layer (``loads.py``)."""
+    out = []
+    for i, hole in enumerate(cfg.boreholes):
+        pts = wall_layer(x, hole.centre, hole.radius, cfg.lattice.spacing)
+        if len(pts) == 0:
+            raise ConfigError(f"key 'pd.boreholes[{i}]': no lattice point lies within one spacing of the wall")
+        force = wall_force_per_pascal(x, vol, pts, hole.centre, hole.radius, cfg.thickness)
+        out.append(PressureLoad(pts, force, hole.peak_pressure, hole.rise_time, hole.beta_over_alpha))
+    return tuple(out)
+
+
+def build_loads(cfg: PDConfig, x: np.ndarray, vol: np.ndarray, spacing: np.ndarray | None = None) -> Loads:
     n, dim = len(x), cfg.dim
     fixed, fixed_velocity, body = np.zeros((n, 3), bool), np.zeros((n, 3)), np.zeros((n, 3))
     for i, bc in enumerate(cfg.velocities):
@@ -132,7 +159,8 @@ def build_loads(cfg: PDConfig, x: np.ndarray, spacing: np.ndarray | None = None)
         else:
             h = cfg.lattice.spacing if cfg.lattice is not None else float(spacing[sel].mean())
         body[sel, :dim] += np.asarray(tr.traction, float) / h
-    return Loads(fixed, fixed_velocity, body)
+    vol = point_volumes(cfg, n) if vol is None else vol
+    return Loads(fixed, fixed_velocity, body, borehole_loads(cfg, x, vol))
 
 
 def initial_velocity(cfg: PDConfig, x: np.ndarray, body_lower, body_upper) -> np.ndarray:
@@ -158,7 +186,8 @@ def build_system(cfg: PDConfig, case_dir: Path | None = None) -> PDSystem:
     bonds = build_bonds(cfg, pts)
     law, stiffness = build_law(cfg, pts, bonds)
     check_time_step(cfg.dt, verlet_bound(cfg.material.density, pts.vol, bonds.owner, bonds.nbr, stiffness))
-    return PDSystem(pts.x, pts.vol, cfg.material.density, law, bonds, build_loads(cfg, pts.x, pts.spacing), cfg.dt,
+    return PDSystem(pts.x, pts.vol, cfg.material.density, law, bonds, build_loads(cfg, pts.x, pts.vol, pts.spacing),
+                    cfg.dt,
                     initial_velocity(cfg, pts.x, pts.lower, pts.upper), horizon=pts.horizon)
 
 

@@ -171,3 +171,15 @@ def compress(offsets: np.ndarray, nbr: np.ndarray, keep: np.ndarray) -> tuple[np
     new = np.zeros_like(offsets)
     np.cumsum(np.bincount(owner[keep], minlength=len(offsets) - 1), out=new[1:])
     return new, nbr[keep]
+
+
+def hole_keep(x: np.ndarray, offsets: np.ndarray, nbr: np.ndarray, centre, radius: float) -> np.ndarray:
+    """Mask of the bonds whose segment stays outside the open disc |y − c| < R of a hole (2D):
+    the distance from c to the closest point of the segment p–q is at least R. Vectorised NumPy
+    (one pass at build time)."""
+    owner = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
+    c = np.asarray(centre, float)
+    p, d = x[owner, :2] - c, x[nbr, :2] - x[owner, :2]
+    t = np.clip(-(p * d).sum(axis=1) / (d * d).sum(axis=1), 0.0, 1.0)
+    closest = p + t[:, None] * d
+    return np.hypot(closest[:, 0], closest[:, 1]) >= radius

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .forces import break_bonds, damage, force_density
+from .loads import PressureLoad
 from .state import state_force_density, state_update
 
 
@@ -35,11 +36,22 @@ class Bonds:
 @dataclass
 class Loads:
     """Boundary loads: ``fixed`` (N, 3) bool, the components with a prescribed velocity
-    ``fixed_velocity`` (N, 3) [m/s]; ``body_force`` (N, 3) [N/m³] from the tractions."""
+    ``fixed_velocity`` (N, 3) [m/s]; ``body_force`` (N, 3) [N/m³] from the tractions (constant);
+    ``pressures``, time-dependent pressures (boreholes, eq 12) as body forces."""
 
     fixed: np.ndarray
     fixed_velocity: np.ndarray
     body_force: np.ndarray
+    pressures: tuple[PressureLoad, ...] = ()
+
+    def body_force_at(self, t: float) -> np.ndarray:
+        """The body force of all loads at time ``t`` [N/m³], (N, 3)."""
+        if not self.pressures:
+            return self.body_force
+        out = self.body_force.copy()
+        for p in self.pressures:
+            p.add_body_force(t, out)
+        return out
 
 
 class BondBased:
@@ -111,29 +123,31 @@ class PDSystem:
         self.dissipated += released
 
     def _kick(self) -> None:
-        """Half a step of acceleration (ρ0 ü = f + b, eq 11); prescribed components keep their velocity."""
-        self.v += (0.5 * self.dt / self.rho) * (self.f + self.loads.body_force)
+        """Half a step of acceleration (ρ0 ü = f + b(t), eq 11) with the loads at the current time;
+        prescribed components keep their velocity."""
+        self.v += (0.5 * self.dt / self.rho) * (self.f + self.loads.body_force_at(self.t))
         fixed = self.loads.fixed
         self.v[fixed] = self.loads.fixed_velocity[fixed]
 
     def _power(self) -> float:
-        """Power of the boundary loads [W]: the tractions on the free components, and on the
-        prescribed ones the force that holds their velocity against the bonds, −f V."""
+        """Power of the loads [W] at the current time: the tractions and pressures on the free
+        components, and on the prescribed ones the force that holds their velocity against the
+        bonds, −f V."""
         fixed, vol = self.loads.fixed, self.vol[:, None]
-        load = np.where(fixed, -self.f * vol, self.loads.body_force * vol)
+        load = np.where(fixed, -self.f * vol, self.loads.body_force_at(self.t) * vol)
         return float((load * self.v).sum())
 
     def step(self) -> None:
-        """One velocity-Verlet step: kick, drift, bonds and forces, kick; the loads' work by the
-        trapezoidal rule of their power."""
+        """One velocity-Verlet step: kick with the loads at t, drift, bonds and forces, kick with
+        the loads at t + dt; the loads' work by the trapezoidal rule of their power."""
         self._kick()
         self.u += self.dt * self.v
+        self.t += self.dt
         self._update_bonds()
         self._kick()
         power = self._power()
         self.work += 0.5 * self.dt * (self.power + power)
         self.power = power
-        self.t += self.dt
         self.steps += 1
 
     # ------------------------------------------------------------ what it reports
