@@ -37,6 +37,26 @@ def _tet_volume(a, b, c, d):
 
 
 @numba.njit(cache=True)
+def _cell_measure(x):
+    """Area of triangle x[0..2] or volume of tetrahedron x[0..3] (rows of ``x``), with the same
+    arithmetic as :func:`_tri_area` / :func:`_tet_volume` but no temporary arrays: the whole
+    cells, most of the mesh, cost no allocation."""
+    if x.shape[0] == 3:
+        if x.shape[1] == 2:
+            return 0.5 * abs((x[1, 0] - x[0, 0]) * (x[2, 1] - x[0, 1]) - (x[1, 1] - x[0, 1]) * (x[2, 0] - x[0, 0]))
+        u0, u1, u2 = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
+        v0, v1, v2 = x[2, 0] - x[0, 0], x[2, 1] - x[0, 1], x[2, 2] - x[0, 2]
+        cx = u1 * v2 - u2 * v1
+        cy = u2 * v0 - u0 * v2
+        cz = u0 * v1 - u1 * v0
+        return 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
+    u0, u1, u2 = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
+    v0, v1, v2 = x[2, 0] - x[0, 0], x[2, 1] - x[0, 1], x[2, 2] - x[0, 2]
+    w0, w1, w2 = x[3, 0] - x[0, 0], x[3, 1] - x[0, 1], x[3, 2] - x[0, 2]
+    return abs(u0 * (v1 * w2 - v2 * w1) - u1 * (v0 * w2 - v2 * w0) + u2 * (v0 * w1 - v1 * w0)) / 6.0
+
+
+@numba.njit(cache=True)
 def _edge_point(xa, xb, sa, sb):
     t = sa / (sa - sb)
     return xa + t * (xb - xa)
@@ -45,15 +65,15 @@ def _edge_point(xa, xb, sa, sb):
 @numba.njit(cache=True)
 def _triangle_cut(x, s):
     """(area of {s>=0}, length of {s=0}) for one triangle."""
-    full = _tri_area(x[0], x[1], x[2])
     npos = 0
     for i in range(3):
         if s[i] >= 0.0:
             npos += 1
-    if npos == 3:
-        return full, 0.0
     if npos == 0:
         return 0.0, 0.0
+    full = _cell_measure(x)
+    if npos == 3:
+        return full, 0.0
     # lone vertex: the one whose sign differs from the other two
     lone = 0
     for i in range(3):
@@ -74,15 +94,15 @@ def _triangle_cut(x, s):
 @numba.njit(cache=True)
 def _tet_cut(x, s):
     """(volume of {s>=0}, area of {s=0}) for one tetrahedron."""
-    full = _tet_volume(x[0], x[1], x[2], x[3])
     npos = 0
     for i in range(4):
         if s[i] >= 0.0:
             npos += 1
-    if npos == 4:
-        return full, 0.0
     if npos == 0:
         return 0.0, 0.0
+    full = _cell_measure(x)
+    if npos == 4:
+        return full, 0.0
     if npos == 1 or npos == 3:
         lone = 0
         for i in range(4):
