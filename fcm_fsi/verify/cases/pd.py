@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ...config.loader import build
-from ...config.pd import PDConfig
+from ...config.pd import BOND_BASED_POISSON, PDConfig
 from ...io.logging import get_logger
 from ...pd.builder import build_system, lattice_stable_time_step
 from ...pd.forces import force_density
@@ -37,8 +37,8 @@ def strip(spacing: float, **over) -> PDConfig:
     return dataclasses.replace(cfg, dt=0.5 * lattice_stable_time_step(cfg))
 
 
-def lattice_moduli(factor: float = FACTOR) -> tuple[float, float]:
-    """(C11, C12) / E of the lattice stencil (an interior point, volume correction β): the
+def lattice_moduli(factor: float = FACTOR, formulation: str = "plane_stress") -> tuple[float, float]:
+    """(C11, C12) / E of the 2D lattice stencil (an interior point, volume correction β): the
     stiffness C_ijkl = Σ_ξ C β |ξ| n_i n_j n_k n_l V the strip converges to as δ → 0 at fixed δ/Δx
     (the quadrature error of the horizon integral does not depend on δ). Classical plane
     stress with ν = 1/3: C11 = 9/8, C12 = 3/8."""
@@ -50,7 +50,8 @@ def lattice_moduli(factor: float = FACTOR) -> tuple[float, float]:
     keep = (r > 0) & (r <= family_radius(delta, dx))
     g, r = g[keep], r[keep]
     n = g / r[:, None]
-    w = micromodulus("plane_stress", 1.0, 1.0 / 3.0, delta) * volume_correction(r, delta, dx) * r * dx * dx
+    nu = BOND_BASED_POISSON[formulation]
+    w = micromodulus(formulation, 1.0, nu, delta) * volume_correction(r, delta, dx) * r * dx * dx
     return float((w * n[:, 0] ** 4).sum()), float((w * n[:, 0] ** 2 * n[:, 1] ** 2).sum())
 
 

@@ -18,9 +18,10 @@ from ...config.loader import build
 from ...config.pd import BOND_BASED_POISSON, PDConfig
 from ...io.logging import get_logger
 from ...pd.builder import build_system, lattice_stable_time_step
-from ...pd.material import critical_stretch, family_radius, micromodulus, volume_correction
+from ...pd.material import critical_stretch
 from ..plotting import save_figure
 from ..registry import at_least, at_most, in_interval, register, report_only
+from .pd import lattice_moduli
 
 log = get_logger("verify.pd_fracture")
 CRACKED = 0.35                        # damage of a cracked point (Bobaru & Zhang 2016: 0.35–0.4)
@@ -29,16 +30,8 @@ CRACKED = 0.35                        # damage of a cracked point (Bobaru & Zhan
 # ---------------------------------------------------------------------------------------- wave speeds
 def lattice_c11(formulation: str, factor: float) -> float:
     """C11 / E of the lattice stencil at δ = ``factor`` Δx (an interior point, volume correction
-    β): Σ_ξ C β |ξ| n_x⁴ V, the long-wave stiffness of a P wave on the lattice."""
-    dx, delta = 1.0, factor
-    k = int(math.ceil(factor)) + 1
-    ax = np.arange(-k, k + 1) * dx
-    g = np.stack(np.meshgrid(ax, ax, indexing="ij"), -1).reshape(-1, 2)
-    r = np.linalg.norm(g, axis=1)
-    keep = (r > 0) & (r <= family_radius(delta, dx))
-    g, r = g[keep], r[keep]
-    c = micromodulus(formulation, 1.0, BOND_BASED_POISSON[formulation], delta)
-    return float((c * volume_correction(r, delta, dx) * r * (g[:, 0] / r) ** 4).sum())
+    β): the long-wave stiffness of a P wave on the lattice."""
+    return lattice_moduli(factor, formulation)[0]
 
 
 def classical_c11(formulation: str) -> float:
