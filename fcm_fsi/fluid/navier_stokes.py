@@ -170,6 +170,7 @@ class NavierStokes:
         # never with a direct solve, where it would turn Newton into a chord iteration
         self.reuse_preconditioner = reuse if reuse is not None else opts.get("ksp_type") != "preonly"
         self.ksp = solvers.make_ksp(self.comm, self.A, petsc_prefix, opts, fields=self.field_index_sets())
+        solvers.absolute_floor(self.ksp, config.atol, opts)
         self.history: list[StepInfo] = []
         self.backtracks = 0   # line-search halvings over the run (``_backtrack``)
         self._preconditioner_built: int | None = None   # step whose first solve built the preconditioner

@@ -84,6 +84,15 @@ def make_ksp(comm, A: PETSc.Mat, prefix: str, options: dict,
     return ksp
 
 
+def absolute_floor(ksp: PETSc.KSP, atol: float, options: dict) -> None:
+    """Stop ``ksp`` also at ‖r‖ ≤ ``atol`` (the nonlinear iteration's absolute tolerance) unless
+    ``options`` set ksp_atol: a linear residual that small already meets the step's stopping
+    rule, and near rest (‖b‖ tiny) the relative tolerance alone can lie below round-off."""
+    if "ksp_atol" not in options:
+        rtol, _, divtol, max_it = ksp.getTolerances()
+        ksp.setTolerances(rtol=rtol, atol=atol, divtol=divtol, max_it=max_it)
+
+
 #: KSP handle → (prefix, its option names) to remove from PETSc's table after its first solve
 _PENDING: dict[int, tuple[str, list[str]]] = {}
 
