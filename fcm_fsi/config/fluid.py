@@ -82,8 +82,9 @@ class FluidConfig:
                       "velocity and τ extrapolated from the last two steps, (1 + θ)uⁿ − θuⁿ⁻¹ (second order, no "
                       "iteration: rtol, atol only decide whether a solve is needed)")
     rtol: float = param(1.0e-8, doc="nonlinear stop: ‖R‖ ≤ max(rtol·‖R₀‖, atol) each step", gt=0, lt=1)
-    atol: float = param(1.0e-10, doc="absolute residual tolerance of the nonlinear iteration, and of its Krylov "
-                                     "solves unless fluid.petsc sets ksp_atol", gt=0)
+    atol: float = param(1.0e-10, doc="absolute residual tolerance of the nonlinear iteration; a Krylov solve that "
+                                     "stops short of its rtol (iteration limit) is accepted when its residual is below it",
+                        gt=0)
     tau_freeze: float = param(0.0, doc="keep τ (eqs 6–10) fixed for the rest of a step once the residual has dropped "
                                       "by this factor (0 = recompute every iteration: the step solves the equations "
                                       "with τ(uⁿ⁺¹) exactly; e.g. 1e-3 stops Newton cycling when the switch of eq 10 "
