@@ -17,42 +17,24 @@ import numpy as np
 
 @numba.njit(cache=True)
 def _tri_area(a, b, c):
+    """Area of the triangle a, b, c (2D or 3D points), in scalars: no temporary arrays, so the
+    whole cells, most of the mesh, cost no allocation."""
     if a.shape[0] == 2:
         return 0.5 * abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
-    u = b - a
-    v = c - a
-    cx = u[1] * v[2] - u[2] * v[1]
-    cy = u[2] * v[0] - u[0] * v[2]
-    cz = u[0] * v[1] - u[1] * v[0]
+    u0, u1, u2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    v0, v1, v2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    cx = u1 * v2 - u2 * v1
+    cy = u2 * v0 - u0 * v2
+    cz = u0 * v1 - u1 * v0
     return 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
 
 
 @numba.njit(cache=True)
 def _tet_volume(a, b, c, d):
-    u = b - a
-    v = c - a
-    w = d - a
-    return abs(u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0])
-               + u[2] * (v[0] * w[1] - v[1] * w[0])) / 6.0
-
-
-@numba.njit(cache=True)
-def _cell_measure(x):
-    """Area of triangle x[0..2] or volume of tetrahedron x[0..3] (rows of ``x``), with the same
-    arithmetic as :func:`_tri_area` / :func:`_tet_volume` but no temporary arrays: the whole
-    cells, most of the mesh, cost no allocation."""
-    if x.shape[0] == 3:
-        if x.shape[1] == 2:
-            return 0.5 * abs((x[1, 0] - x[0, 0]) * (x[2, 1] - x[0, 1]) - (x[1, 1] - x[0, 1]) * (x[2, 0] - x[0, 0]))
-        u0, u1, u2 = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
-        v0, v1, v2 = x[2, 0] - x[0, 0], x[2, 1] - x[0, 1], x[2, 2] - x[0, 2]
-        cx = u1 * v2 - u2 * v1
-        cy = u2 * v0 - u0 * v2
-        cz = u0 * v1 - u1 * v0
-        return 0.5 * np.sqrt(cx * cx + cy * cy + cz * cz)
-    u0, u1, u2 = x[1, 0] - x[0, 0], x[1, 1] - x[0, 1], x[1, 2] - x[0, 2]
-    v0, v1, v2 = x[2, 0] - x[0, 0], x[2, 1] - x[0, 1], x[2, 2] - x[0, 2]
-    w0, w1, w2 = x[3, 0] - x[0, 0], x[3, 1] - x[0, 1], x[3, 2] - x[0, 2]
+    """Volume of the tetrahedron a, b, c, d, in scalars (as :func:`_tri_area`)."""
+    u0, u1, u2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    v0, v1, v2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    w0, w1, w2 = d[0] - a[0], d[1] - a[1], d[2] - a[2]
     return abs(u0 * (v1 * w2 - v2 * w1) - u1 * (v0 * w2 - v2 * w0) + u2 * (v0 * w1 - v1 * w0)) / 6.0
 
 
@@ -71,7 +53,7 @@ def _triangle_cut(x, s):
             npos += 1
     if npos == 0:
         return 0.0, 0.0
-    full = _cell_measure(x)
+    full = _tri_area(x[0], x[1], x[2])
     if npos == 3:
         return full, 0.0
     # lone vertex: the one whose sign differs from the other two
@@ -100,7 +82,7 @@ def _tet_cut(x, s):
             npos += 1
     if npos == 0:
         return 0.0, 0.0
-    full = _cell_measure(x)
+    full = _tet_volume(x[0], x[1], x[2], x[3])
     if npos == 4:
         return full, 0.0
     if npos == 1 or npos == 3:
