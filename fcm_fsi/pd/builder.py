@@ -159,7 +159,6 @@ def build_loads(cfg: PDConfig, x: np.ndarray, vol: np.ndarray, spacing: np.ndarr
         else:
             h = cfg.lattice.spacing if cfg.lattice is not None else float(spacing[sel].mean())
         body[sel, :dim] += np.asarray(tr.traction, float) / h
-    vol = point_volumes(cfg, n) if vol is None else vol
     return Loads(fixed, fixed_velocity, body, borehole_loads(cfg, x, vol))
 
 
@@ -179,24 +178,26 @@ def initial_velocity(cfg: PDConfig, x: np.ndarray, body_lower, body_upper) -> np
     return v
 
 
-def build_system(cfg: PDConfig, case_dir: Path | None = None) -> PDSystem:
-    """The body of ``cfg`` (a particle file relative to ``case_dir``); refuses ``pd.dt`` above
-    the stable step (ConfigError naming the bound)."""
+def _body(cfg: PDConfig, case_dir: Path | None) -> tuple[Points, Bonds, BondBased | StateBased, float]:
+    """The points, bonds and law of ``cfg`` and the body's stable step Δt_crit [s]."""
     pts = build_points(cfg, case_dir)
     bonds = build_bonds(cfg, pts)
     law, stiffness = build_law(cfg, pts, bonds)
-    check_time_step(cfg.dt, verlet_bound(cfg.material.density, pts.vol, bonds.owner, bonds.nbr, stiffness))
+    return pts, bonds, law, verlet_bound(cfg.material.density, pts.vol, bonds.owner, bonds.nbr, stiffness)
+
+
+def build_system(cfg: PDConfig, case_dir: Path | None = None) -> PDSystem:
+    """The body of ``cfg`` (a particle file relative to ``case_dir``); refuses ``pd.dt`` above
+    the stable step (ConfigError naming the bound)."""
+    pts, bonds, law, dt_crit = _body(cfg, case_dir)
+    check_time_step(cfg.dt, dt_crit)
     return PDSystem(pts.x, pts.vol, cfg.material.density, law, bonds, build_loads(cfg, pts.x, pts.vol, pts.spacing),
-                    cfg.dt,
-                    initial_velocity(cfg, pts.x, pts.lower, pts.upper), horizon=pts.horizon)
+                    cfg.dt, initial_velocity(cfg, pts.x, pts.lower, pts.upper), horizon=pts.horizon)
 
 
 def body_stable_time_step(cfg: PDConfig, case_dir: Path | None = None) -> float:
     """Δt_crit of the whole body from its bonds (the bound :func:`build_system` checks)."""
-    pts = build_points(cfg, case_dir)
-    bonds = build_bonds(cfg, pts)
-    _, stiffness = build_law(cfg, pts, bonds)
-    return verlet_bound(cfg.material.density, pts.vol, bonds.owner, bonds.nbr, stiffness)
+    return _body(cfg, case_dir)[3]
 
 
 def check_time_step(dt: float, dt_crit: float) -> None:
@@ -230,4 +231,3 @@ def lattice_stable_time_step(cfg: PDConfig) -> float:
     vol = dx ** 3 if dim == 3 else dx * dx * cfg.thickness
     stiff = 2.0 * c * vol * (volume_correction(r, delta, dx) / r).sum()
     return math.sqrt(2.0 * cfg.material.density / stiff)
-
