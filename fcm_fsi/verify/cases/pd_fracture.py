@@ -24,7 +24,7 @@ from ..registry import at_least, at_most, in_interval, register, report_only
 from .pd import lattice_moduli
 
 log = get_logger("verify.pd_fracture")
-CRACKED = 0.35                        # damage of a cracked point (Bobaru & Zhang 2016: 0.35–0.4)
+CRACKED = 0.35                        # damage of a cracked point (Bobaru & Zhang 2015: 0.35–0.4)
 
 
 # ---------------------------------------------------------------------------------------- wave speeds
@@ -279,7 +279,7 @@ def pd_borehole_blast(level, out_dir: Path, comm) -> list:
 
 # ================================================================================ Homalite branching
 HOMALITE = {"youngs_modulus": 4.55e9, "density": 1230.0, "fracture_energy": 38.46}
-PLATE = (0.4, 0.2)                    # length × height [m] (Bobaru & Zhang 2016 §5.2; seed §3(1))
+PLATE = (0.4, 0.2)                    # length × height [m] (Bobaru & Zhang 2015 §5.2; seed §3(1))
 NOTCH = 0.2                           # notch from the left edge along y = H/2 [m]
 TRACTION = 1.0e6                      # on the top and bottom edges [Pa]
 
@@ -350,7 +350,7 @@ def homalite_run(spacing: float, t_end: float, every: float) -> dict:
     return rec
 
 
-@register("pd_homalite_branching", "PD Homalite plate under 1 MPa (seed §3(1), Bobaru & Zhang 2016): crack "
+@register("pd_homalite_branching", "PD Homalite plate under 1 MPa (seed §3(1), Bobaru & Zhang 2015): crack "
           "path, speed and branching", issue=49)
 def pd_homalite_branching(level, out_dir: Path, comm) -> list:
     """Bobaru & Zhang's (2016, §5.2) pre-notched Homalite plate as the seed's §3(1): 0.4 × 0.2 m, a
