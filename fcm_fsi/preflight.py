@@ -276,7 +276,8 @@ def check_blocks(case: Case, ctx: Context) -> Iterator[Finding]:
         if np.any(bhi <= mlo + tol) or np.any(blo >= mhi - tol):
             yield Finding("error", _block_key(case, b),
                           f"block {b} spans {_fmt(blo)}..{_fmt(bhi)} m, wholly outside the fluid mesh "
-                          f"{_fmt(mlo)}..{_fmt(mhi)} m: the fluid and the block never meet")
+                          f"{_fmt(mlo)}..{_fmt(mhi)} m (keys mesh.lower and mesh.upper): the fluid and the "
+                          "block never meet")
         elif not fixed[b] and (np.any(blo < mlo - tol) or np.any(bhi > mhi + tol)):
             partly.append(b)
     if partly:
