@@ -113,7 +113,6 @@ def test_a_mumps_factorisation_out_of_workspace_is_retried_with_more_and_no_othe
     assert not more_mumps_workspace(real)
 
 
-
 def test_a_solve_stopped_below_the_nonlinear_atol_is_accepted():
     """A Krylov solve that hits its iteration limit is a failure, unless its true residual is
     already below the nonlinear iteration's atol (a step at rest, where rtol‖b‖ lies below

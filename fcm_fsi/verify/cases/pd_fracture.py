@@ -353,7 +353,7 @@ def homalite_run(spacing: float, t_end: float, every: float) -> dict:
 @register("pd_homalite_branching", "PD Homalite plate under 1 MPa (seed §3(1), Bobaru & Zhang 2015): crack "
           "path, speed and branching", issue=49)
 def pd_homalite_branching(level, out_dir: Path, comm) -> list:
-    """Bobaru & Zhang's (2016, §5.2) pre-notched Homalite plate as the seed's §3(1): 0.4 × 0.2 m, a
+    """Bobaru & Zhang's (2015, §5.2) pre-notched Homalite plate as the seed's §3(1): 0.4 × 0.2 m, a
     0.2 m notch from the left edge along mid-height, plane stress bond-based PD (E = 4.55 GPa,
     ρ = 1230 kg/m³, G0 = 38.46 J/m², ν = 1/3), δ = 4.015 Δx, 1 MPa traction on the top and bottom
     edges from t = 0. Δx = 1 mm (full: the seed's 80,000-point lattice) or 4 mm (quick).
