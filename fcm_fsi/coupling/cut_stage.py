@@ -71,6 +71,7 @@ class CutStage:
                                      h_min, depth)
         self._phi_of_node = None           # phase-field dof at each mesh vertex (built on first use)
         self._pass_cut = None              # (node owners, statistics) of the last full rebuild
+        self._poses = None                 # the blocks' (positions, quaternions) at the last full rebuild
         self.stats = self.rebuild()
 
     def rebuild(self, velocities: np.ndarray | None = None, same_poses: bool = False):
@@ -78,13 +79,18 @@ class CutStage:
         the blocks' current v, ω, or from ``velocities`` (the implicit coupling's iterated
         unknown). ``same_poses``: the blocks stand where the last rebuild found them (a later
         pass of the implicit coupling), so only the wall velocity is set again, unless
-        ``drain_pockets`` (the drain also resets the restored flow's pressure). Returns the
-        cut's statistics."""
+        ``drain_pockets`` (the drain also resets the restored flow's pressure). The same holds
+        whenever every pose equals, to the bit, the last full rebuild's (fixed or resting
+        blocks): the level set, the cut and the hidden surfaces are functions of the poses.
+        Returns the cut's statistics."""
+        st = self.dem.system.state
+        same_poses = same_poses or (self._poses is not None and np.array_equal(st.pos, self._poses[0])
+                                    and np.array_equal(st.quat, self._poses[1]))
         if same_poses and self._pass_cut is not None and not self.case.coupling.drain_pockets:
             owner, self.stats = self._pass_cut
             self.cut.set_wall_velocity(self.walls.at_nodes(owner, velocities)[0])
             return self.stats
-        st = self.dem.system.state
+        self._poses = (st.pos.copy(), st.quat.copy())
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
         if self.pockets is not None:
             self.pockets.apply(level, owner, self.levelset, self.walls.fill_free_to_part(owner), st.pos, st.quat,

@@ -117,7 +117,7 @@ class SealedPockets:
         q = self._q_of_node[nodes]
         self._p_pocket.x.array[q] = target
         w = np.asarray(ns.Q_map)[q]
-        ns.set_step_bcs([fem.dirichletbc(self._p_pocket, [w.astype(np.int32), q.astype(np.int32)], ns.W.sub(1))])
+        ns.set_step_bcs([fem.dirichletbc(self._p_pocket, [w.astype(np.int32), q.astype(np.int32)], ns.pressure_subspace)])
         self.cells = (pocket[self.cut.geom_cells] >= 0).any(axis=1)
 
     def counts(self) -> dict[str, float]:

@@ -79,9 +79,15 @@ class BCSet:
 def velocity_bc(ns, facets: np.ndarray, fn: Callable[[np.ndarray, float], np.ndarray], bcset: BCSet) -> None:
     """Time-dependent velocity u = fn(x, t) on the given facets (all components)."""
     fdim = ns.mesh.topology.dim - 1
+    gdim = ns.mesh.geometry.dim
     g = fem.Function(ns.V)
-    dofs = fem.locate_dofs_topological((ns.W.sub(0), ns.V), fdim, facets)
-    bcset.bcs.append(fem.dirichletbc(g, dofs, ns.W.sub(0)))
+    w_to_v = np.empty(len(ns.U.x.array), dtype=np.int32)     # W index of a velocity dof → V index
+    w_to_v[ns.V_map] = np.arange(len(ns.V_map), dtype=np.int32)
+    for axis in range(gdim):
+        W_i = ns.velocity_subspace(axis)
+        V_i, _ = W_i.collapse()
+        w_dofs = fem.locate_dofs_topological((W_i, V_i), fdim, facets)[0]
+        bcset.bcs.append(fem.dirichletbc(g, [w_dofs, w_to_v[w_dofs]], W_i))
 
     def update(t: float) -> None:
         g.interpolate(lambda x: fn(x, t))
@@ -117,10 +123,11 @@ def _one(ns, bc: BoundaryCondition, bcset: BCSet) -> None:
         velocity_bc(ns, facets, profile, bcset)
     elif bc.kind == "slip":
         axis, _, _, _ = _flat_axis(ns, bc.boundary, facets)
-        Vi, _ = ns.W.sub(0).sub(axis).collapse()
+        W_i = ns.velocity_subspace(axis)
+        Vi, _ = W_i.collapse()
         zero = fem.Function(Vi)
-        dofs = fem.locate_dofs_topological((ns.W.sub(0).sub(axis), Vi), fdim, facets)
-        bcset.bcs.append(fem.dirichletbc(zero, dofs, ns.W.sub(0).sub(axis)))
+        dofs = fem.locate_dofs_topological((W_i, Vi), fdim, facets)
+        bcset.bcs.append(fem.dirichletbc(zero, dofs, W_i))
 
 
 def _pin_pressure(ns, point, bcset: BCSet) -> None:
@@ -135,10 +142,10 @@ def _pin_pressure(ns, point, bcset: BCSet) -> None:
     best = ns.comm.allreduce((float(d[i]), ns.comm.rank), op=MPI.MINLOC)
     target = ns.comm.bcast(X[i] if ns.comm.rank == best[1] else None, root=best[1])
     tol = 1e-12 * max(1.0, float(np.abs(target).max()))
-    dofs = fem.locate_dofs_geometrical((ns.W.sub(1), ns.Q),
+    dofs = fem.locate_dofs_geometrical((ns.pressure_subspace, ns.Q),
                                        lambda x: np.linalg.norm(x[:gdim].T - target[:gdim], axis=1) <= tol)
     zero = fem.Function(ns.Q)
-    bcset.bcs.append(fem.dirichletbc(zero, dofs, ns.W.sub(1)))
+    bcset.bcs.append(fem.dirichletbc(zero, dofs, ns.pressure_subspace))
     bcset.pinned_pressure = True
     bcset.pinned_point = np.asarray(target[:gdim], dtype=float)
 

@@ -16,7 +16,8 @@ from petsc4py import PETSc
 
 
 class ReactionForce:
-    """Force (N, or N/m in 2D) of the fluid on the nodes of ``facets`` for residual form ``F_form``."""
+    """Force (N, or N/m in 2D) of the fluid on the nodes of ``facets`` for residual form ``F_form``;
+    ``W`` is the (u, p) space (:func:`.navier_stokes.velocity_pressure_space`)."""
 
     def __init__(self, W: fem.FunctionSpace, F_form: fem.FormMetadata, facets: np.ndarray) -> None:
         mesh = W.mesh
@@ -25,8 +26,8 @@ class ReactionForce:
         self.b = fem.petsc.create_vector(F_form)
         self.indicators = []
         for i in range(mesh.geometry.dim):
-            Vi, _ = W.sub(0).sub(i).collapse()
-            dofs = fem.locate_dofs_topological((W.sub(0).sub(i), Vi), fdim, facets)[0]
+            Vi, _ = W.sub(i).collapse()
+            dofs = fem.locate_dofs_topological((W.sub(i), Vi), fdim, facets)[0]
             e = fem.Function(W)
             e.x.array[dofs] = 1.0
             self.indicators.append(e)

@@ -29,6 +29,7 @@ from ..config.fluid import FluidConfig
 from ..io.logging import get_logger
 from . import solvers
 from .boundary import build_bcs
+from .krylov_guess import IncrementHistory
 from .ns_forms import (
     FormParts,
     backflow_residual,
@@ -75,6 +76,36 @@ ExtraTerm = Callable[[FormParts], "ufl.Form"]
 CHORD_CONTRACTION = 0.1   # a warm-started step keeps its Jacobian while each Newton step cuts ‖R‖ by this
 
 
+def velocity_pressure_space(mesh) -> fem.FunctionSpace:
+    """The P1 (u, p) space as one blocked space: per vertex the gdim velocity components and then
+    the pressure, so the system matrix has dense (gdim + 1)² blocks (inserted and, with a
+    block matrix, factored and applied block by block)."""
+    gdim = mesh.geometry.dim
+    return fem.FunctionSpace(mesh, ufl.VectorElement("Lagrange", mesh.ufl_cell(), 1, dim=gdim + 1))
+
+
+def split_velocity_pressure(U, gdim: int):
+    """(u, p) of a function, trial or test function of :func:`velocity_pressure_space`."""
+    return ufl.as_vector([U[i] for i in range(gdim)]), U[gdim]
+
+
+def subspace_maps(W: fem.FunctionSpace, V: fem.FunctionSpace, Q: fem.FunctionSpace) -> tuple[np.ndarray, np.ndarray]:
+    """Indices into W's arrays of the P1 velocity space V's and the P1 pressure space Q's dofs
+    (ghosts included), paired through the cells: the three spaces share the element layout, so
+    the k-th vertex of a cell is the k-th entry of its dof list in each."""
+    bs = W.dofmap.index_map_bs
+    gdim = bs - 1
+    w_nodes, v_nodes, q_nodes = W.dofmap.list.array, V.dofmap.list.array, Q.dofmap.list.array
+    n_nodes = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+    v_to_w = np.empty(n_nodes, dtype=np.int64)
+    v_to_w[v_nodes] = w_nodes
+    q_to_w = np.empty(Q.dofmap.index_map.size_local + Q.dofmap.index_map.num_ghosts, dtype=np.int64)
+    q_to_w[q_nodes] = w_nodes
+    V_map = (bs * v_to_w[:, None] + np.arange(gdim)).ravel()
+    Q_map = bs * q_to_w + gdim
+    return V_map.astype(np.int32), Q_map.astype(np.int32)
+
+
 class NavierStokes:
     """Monolithic P1/P1 SUPG/PSPG/LSIC Navier–Stokes solver with a θ-scheme (CN by default).
 
@@ -88,7 +119,7 @@ class NavierStokes:
     dx: integration measure of the volume terms (e.g. a cut-cell quadrature measure).
     extra_terms: callables ``term(parts) -> ufl.Form`` added to the residual; the Jacobian
         follows by differentiation (e.g. the finite-cover penalty term of eq 5).
-    extra_bcs: additional ``fem.DirichletBC`` on the mixed space ``ns.W``.
+    extra_bcs: additional ``fem.DirichletBC`` on the (u, p) space ``ns.W``.
     velocity_functions: boundary name → ``fn(x, t)`` velocity (gdim × n array), replacing
         the configured condition there (e.g. an exact solution).
     petsc_prefix, petsc_options: options prefix of the (u, p) solve and extra options.
@@ -109,12 +140,12 @@ class NavierStokes:
                  petsc_options: dict | None = None, pspg_density=None, static_pressure=None,
                  cell_viscosity=None) -> None:
         self.mesh, self.config, self.comm = mesh, config, mesh.comm
-        cell = mesh.ufl_cell()
         gdim = mesh.geometry.dim
-        self.W = fem.FunctionSpace(mesh, ufl.MixedElement([ufl.VectorElement("Lagrange", cell, 1),
-                                                           ufl.FiniteElement("Lagrange", cell, 1)]))
-        self.V, self.V_map = self.W.sub(0).collapse()
-        self.Q, self.Q_map = self.W.sub(1).collapse()
+        self.gdim = gdim
+        self.W = velocity_pressure_space(mesh)
+        self.V = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+        self.Q = fem.FunctionSpace(mesh, ("Lagrange", 1))
+        self.V_map, self.Q_map = subspace_maps(self.W, self.V, self.Q)
         self.U = fem.Function(self.W, name="U")          # (u, p) at t^{n+1}
         self.U_n = fem.Function(self.W, name="U_n")      # (u, p) at t^n
         self.u_adv = fem.Function(self.V, name="u_adv")  # advecting velocity for τ (and Picard)
@@ -141,7 +172,7 @@ class NavierStokes:
 
         self._strain = None
         if config.stabilization.viscous_reconstruction:
-            u_n, _ = ufl.split(self.U_n)
+            u_n, _ = self.split(self.U_n)
             self._strain = StrainProjection(mesh, dx, self.theta, u_n, self.u_nm1)
         self.strain = None if self._strain is None else self._strain.field
         self.parts = self._parts()
@@ -156,7 +187,6 @@ class NavierStokes:
         self._fixed_bcs = self.bc_set.bcs + list(extra_bcs)
         self.bcs: list[fem.DirichletBC] = list(self._fixed_bcs)
 
-        self.A = fem.petsc.create_matrix(self.J_form)
         self.b = fem.petsc.create_vector(self.F_form)
         self._bc_gap = self.b.duplicate()
         self.dU = fem.Function(self.W)
@@ -165,6 +195,7 @@ class NavierStokes:
         schur = solvers.SCHUR_AMG if dx is not None else solvers.SCHUR_GAMG
         opts = dict(config.petsc) or dict(solvers.DIRECT_LU if gdim == 2 else schur)
         opts.update(petsc_options or {})
+        self.A = fem.petsc.create_matrix(self.J_form, solvers.matrix_type(opts))
         reuse = config.reuse_preconditioner
         # automatic: reuse with a Krylov method (a stale preconditioner only costs iterations),
         # never with a direct solve, where it would turn Newton into a chord iteration
@@ -175,12 +206,14 @@ class NavierStokes:
         self._preconditioner_built: int | None = None   # step whose first solve built the preconditioner
         self._last_krylov = 0                           # Krylov iterations of the last solve
         self._guess: np.ndarray | None = None           # start of the next step's iteration (warm_start)
+        # the linearised step's Krylov solve starts from its update extrapolated from the last steps'
+        self.increments = IncrementHistory() if opts.get("ksp_type") != "preonly" else None
 
     def field_index_sets(self) -> dict[str, PETSc.IS]:
         """Owned global rows of velocity ("u") and pressure ("p") in the monolithic system, for
         ``pc_type: fieldsplit`` (options ``fieldsplit_u_*``, ``fieldsplit_p_*``)."""
-        imap = self.W.dofmap.index_map
-        n_owned, first = imap.size_local, imap.local_range[0]
+        imap, bs = self.W.dofmap.index_map, self.W.dofmap.index_map_bs
+        n_owned, first = bs * imap.size_local, bs * imap.local_range[0]
         sets = {}
         for name, dofs in (("u", self.V_map), ("p", self.Q_map)):
             dofs = np.asarray(dofs, dtype=np.int64)
@@ -200,11 +233,11 @@ class NavierStokes:
         return self._J.form
 
     def _parts(self) -> FormParts:
-        u, p = ufl.split(self.U)
+        u, p = self.split(self.U)
         if self.static_pressure is not None:
             p = p + self.static_pressure
-        u_n, _ = ufl.split(self.U_n)
-        w, q = ufl.TestFunctions(self.W)
+        u_n, _ = self.split(self.U_n)
+        w, q = self.split(ufl.TestFunction(self.W))
         u_theta = self.theta * u + (1 - self.theta) * u_n
         a = u_theta if self.config.nonlinear == "newton" else self.u_adv
         return FormParts(u=u, p=p, u_n=u_n, u_theta=u_theta, a=a, w=w, q=q, rho=self.rho, mu=self.mu,
@@ -249,15 +282,32 @@ class NavierStokes:
         return fem.Expression(ts, pts), fem.Expression(tc, pts)
 
     # ------------------------------------------------------------ time stepping
+    def split(self, U):
+        """(u, p) of a function, trial or test function of ``W`` (UFL)."""
+        return split_velocity_pressure(U, self.gdim)
+
+    def velocity_subspace(self, axis: int) -> fem.FunctionSpace:
+        """The subspace of W of one velocity component (for Dirichlet conditions)."""
+        return self.W.sub(axis)
+
+    @property
+    def pressure_subspace(self) -> fem.FunctionSpace:
+        """The subspace of W of the pressure (for Dirichlet conditions)."""
+        return self.W.sub(self.gdim)
+
     @property
     def u(self) -> fem.Function:
-        """Velocity at the latest time (a collapsed copy, m/s)."""
-        return self.U.sub(0).collapse()
+        """Velocity at the latest time (a copy in ``V``, m/s)."""
+        out = fem.Function(self.V)
+        out.x.array[:] = self.U.x.array[self.V_map]
+        return out
 
     @property
     def p(self) -> fem.Function:
-        """Pressure at the latest time (a collapsed copy, Pa)."""
-        return self.U.sub(1).collapse()
+        """Pressure at the latest time (a copy in ``Q``, Pa)."""
+        out = fem.Function(self.Q)
+        out.x.array[:] = self.U.x.array[self.Q_map]
+        return out
 
     def set_step_bcs(self, bcs: Sequence[fem.DirichletBC]) -> None:
         """Dirichlet conditions on ``W`` for the coming steps on top of the case's and the
@@ -416,20 +466,25 @@ class NavierStokes:
         if not np.isfinite(r):
             raise NonlinearSolveError(self.step_count, self.t, info.residuals, "residual is not finite (NaN/inf)")
         if r > self.config.atol:
-            self._update(info, assemble=True, reuse=keep)
+            dt = float(self.dt.value)
+            start = None if self.increments is None else self.increments.guess(self.step_count, dt)
+            self._update(info, assemble=True, reuse=keep, start=start)
+            if self.increments is not None:
+                self.increments.record(self.step_count, dt, self.dU.x.array)
             info.iterations = 1
         self.history.append(info)
         return info
 
-    def _update(self, info: StepInfo, assemble: bool, reuse: bool) -> None:
+    def _update(self, info: StepInfo, assemble: bool, reuse: bool, start: np.ndarray | None = None) -> None:
         """One Newton update U ← U − J⁻¹R on the assembled residual ``self.b``: assemble J unless
         ``assemble`` is False (a chord step), solve with the preconditioner kept when ``reuse``
         (or when an earlier step's is still good), and retry with a fresh one when a kept one
-        has gone stale."""
+        has gone stale. A Krylov solve starts from ``start`` (an estimate of the update) if given."""
         t0 = time.perf_counter()
         if assemble:
             self._assemble_jacobian()
         t1 = time.perf_counter()
+        self._set_start(start)
         reuse = bool(self.reuse_preconditioner and (reuse or self._preconditioner_still_good()))
         self.ksp.getPC().setReusePreconditioner(reuse)
         solvers.solve(self.ksp, self.b, self.dU.vector)
@@ -447,6 +502,16 @@ class NavierStokes:
         info.krylov_iterations += self.ksp.getIterationNumber()
         self.dU.x.scatter_forward()
         self.U.x.array[:] -= self.dU.x.array
+
+    def _set_start(self, start: np.ndarray | None) -> None:
+        """dU ← ``start`` as the Krylov solve's initial guess (else zero). Not screened by its
+        residual: on the dam break the extrapolated start's ‖b − A dU‖ exceeds ‖b‖ in two thirds
+        of the steps, yet the solves need fewer iterations (21.7 per step against 26.1 from
+        zero); a poor start costs iterations, never accuracy."""
+        if start is not None:
+            self.dU.x.array[:] = start
+        if self.increments is not None:
+            self.ksp.setInitialGuessNonzero(start is not None)
 
     def _preconditioner_still_good(self) -> bool:
         """At a step's first solve: keep the preconditioner of an earlier step when
@@ -497,6 +562,6 @@ class NavierStokes:
 
     def divergence_l2(self) -> float:
         """‖∇·u‖_L2 of the current velocity (1/s)."""
-        u, _ = ufl.split(self.U)
+        u, _ = self.split(self.U)
         val = fem.assemble_scalar(fem.form(ufl.div(u) ** 2 * self.dx))
         return float(np.sqrt(self.comm.allreduce(val, op=MPI.SUM)))

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from dolfinx import fem
 from mpi4py import MPI
 
 from ..config.case import Case
@@ -15,26 +16,41 @@ from ..mesh.channel import tag_box_boundaries
 from .loop import SimulationDiverged, finite_or_message
 
 
-def ns_state(ns: NavierStokes, gdim: int) -> dict:
-    """Owned nodal (coords, values) of U, Uⁿ (velocity and pressure) and uⁿ⁻¹."""
+def ns_state(ns: NavierStokes, gdim: int) -> tuple[dict, dict]:
+    """Owned nodal (coords, values) of U, Uⁿ (velocity and pressure), uⁿ⁻¹ and the last updates
+    of the linearised step (the start of its Krylov solve), and the updates' steps and Δt."""
     nv, nq = ns.V.dofmap.index_map.size_local, ns.Q.dofmap.index_map.size_local
     xv, xq = ns.V.tabulate_dof_coordinates()[:nv], ns.Q.tabulate_dof_coordinates()[:nq]
     fields = {}
-    for name, arr in (("U", ns.U), ("U_n", ns.U_n)):
-        fields[f"{name}_u"] = (xv, arr.x.array[ns.V_map].reshape(-1, gdim)[:nv].copy())
-        fields[f"{name}_p"] = (xq, arr.x.array[ns.Q_map][:nq].copy())
+    arrays = [("U", ns.U.x.array), ("U_n", ns.U_n.x.array)]
+    increments = [] if ns.increments is None else [("dU_last", ns.increments.last), ("dU_before", ns.increments.before)]
+    arrays += [(name, inc.values) for name, inc in increments if inc is not None]
+    for name, arr in arrays:
+        fields[f"{name}_u"] = (xv, arr[ns.V_map].reshape(-1, gdim)[:nv].copy())
+        fields[f"{name}_p"] = (xq, arr[ns.Q_map][:nq].copy())
     fields["u_nm1"] = (xv, ns.u_nm1.x.array.reshape(-1, gdim)[:nv].copy())
-    return fields
+    steps = [(inc.step, inc.dt) if inc is not None else (np.nan, np.nan) for _, inc in increments]
+    return fields, {"ns_increments": np.array(steps, dtype=float).reshape(-1, 2)}
 
 
 def ns_load_state(ns: NavierStokes, checkpoint) -> None:
     """Inverse of :func:`ns_state` (nodes matched by coordinates)."""
     from ..io.checkpoint import nodal_values_at
     xv, xq = ns.V.tabulate_dof_coordinates(), ns.Q.tabulate_dof_coordinates()
-    for name, arr in (("U", ns.U), ("U_n", ns.U_n)):
-        arr.x.array[ns.V_map] = nodal_values_at(xv, checkpoint.fields[f"{name}_u"], f"{name}_u").ravel()
-        arr.x.array[ns.Q_map] = nodal_values_at(xq, checkpoint.fields[f"{name}_p"], f"{name}_p")
+
+    def array(name: str) -> np.ndarray:
+        out = np.zeros_like(ns.U.x.array)
+        out[ns.V_map] = nodal_values_at(xv, checkpoint.fields[f"{name}_u"], f"{name}_u").ravel()
+        out[ns.Q_map] = nodal_values_at(xq, checkpoint.fields[f"{name}_p"], f"{name}_p")
+        return out
+    ns.U.x.array[:], ns.U_n.x.array[:] = array("U"), array("U_n")
     ns.u_nm1.x.array[:] = nodal_values_at(xv, checkpoint.fields["u_nm1"], "u_nm1").ravel()
+    if ns.increments is not None:
+        ns.increments.clear()
+        steps = checkpoint.globals.get("ns_increments", np.zeros((0, 2)))
+        for name, (step, dt) in reversed(list(zip(("dU_last", "dU_before"), steps))):
+            if np.isfinite(step) and f"{name}_u" in checkpoint.fields:
+                ns.increments.record(int(step), float(dt), array(name))
 
 
 def ns_snapshot(ns: NavierStokes) -> tuple:
@@ -71,9 +87,9 @@ class FluidModel:
         tagged = tag_box_boundaries(self.mesh, case.mesh.lower, case.mesh.upper)
         self.ns = NavierStokes(self.mesh, case.fluid, case.run.dt, facet_tags=tagged.facet_tags,
                                boundary_names=tagged.names, **(ns_options or {}))
-        self.u_out = self.ns.U.sub(0).collapse()
+        self.u_out = fem.Function(self.ns.V)
         self.u_out.name = "u"
-        self.p_out = self.ns.U.sub(1).collapse()
+        self.p_out = fem.Function(self.ns.Q)
         self.p_out.name = "p"
         self.output_functions = [self.u_out, self.p_out]
         self.last_dt = case.run.dt
@@ -119,7 +135,9 @@ class FluidModel:
         ns_restore(self.ns, ns)
 
     def state(self):
-        return ns_state(self.ns, self.gdim), {"fluid_scalars": np.array([self.ns.t, float(self.ns.step_count)])}
+        fields, globals_ = ns_state(self.ns, self.gdim)
+        globals_["fluid_scalars"] = np.array([self.ns.t, float(self.ns.step_count)])
+        return fields, globals_
 
     def load_state(self, checkpoint) -> None:
         ns_load_state(self.ns, checkpoint)

@@ -168,7 +168,7 @@ class TwoPhaseModel:
                            "wetted_bottom": (fem.form(self.pf.phi * ds(tagged.names[bottom])),
                                              measure(bottom) / (hi[0] - lo[0]))}
         self._p_bottom = (fem.form(p * ds(tagged.names[bottom])), measure(bottom))
-        u, _ = ufl.split(self.ns.U)
+        u, _ = self.ns.split(self.ns.U)
         dx = ufl.Measure("dx", domain=self.mesh, metadata={"quadrature_degree": 3})
         self._kinetic = fem.form(0.5 * self.rho * ufl.inner(u, u) * dx)
 
@@ -315,7 +315,9 @@ class TwoPhaseModel:
 
     def state(self):
         fields, globals_ = self.pf.state()
-        fields.update(ns_state(self.ns, self.gdim))
+        ns_fields, ns_globals = ns_state(self.ns, self.gdim)
+        fields.update(ns_fields)
+        globals_.update(ns_globals)
         globals_["two_phase_scalars"] = np.array([self.ns.t, float(self.ns.step_count)])
         return fields, globals_
 

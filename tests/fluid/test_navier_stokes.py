@@ -402,3 +402,29 @@ def test_linearised_step_departs_from_newton_at_second_order_in_time():
     orders = np.log2(np.array(diffs[:-1]) / np.array(diffs[1:]))
     assert orders.min() > 2.0, diffs
     assert max(d / e for d, e in zip(diffs, errors)) < 1e-2, (diffs, errors)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_blocked_space_pairs_velocity_and_pressure_of_each_vertex(dim):
+    """(u, p) live in one blocked P1 space, gdim + 1 values per vertex; V_map and Q_map take the
+    velocity and pressure dofs out of it at the same vertices as the separate P1 spaces' dofs
+    (every dof, ghosts included), and a block matrix carries the ILU solvers' systems."""
+    from dolfinx import fem
+
+    from fcm_fsi.fluid import solvers
+    from fcm_fsi.mesh.channel import box
+    tm = rectangle(MPI.COMM_WORLD, n=(6, 4)) if dim == 2 else box(MPI.COMM_WORLD, n=(3, 3, 2))
+    cfg = FluidConfig(density=1.0, viscosity=0.01, petsc=solvers.ITERATIVE_2D if dim == 2 else solvers.ITERATIVE_3D,
+                      boundaries=(BoundaryCondition(boundary="xmin", kind="no_slip"),))
+    ns = NavierStokes(tm.mesh, cfg, 0.1, facet_tags=tm.facet_tags, boundary_names=tm.names)
+    assert ns.W.dofmap.index_map_bs == dim + 1 and ns.A.getType().endswith("baij")
+    xw = ns.W.tabulate_dof_coordinates()                       # one row per vertex (block)
+    xv, xq = ns.V.tabulate_dof_coordinates(), ns.Q.tabulate_dof_coordinates()
+    assert np.array_equal(np.sort(ns.V_map), np.sort(np.setdiff1d(np.arange(len(ns.U.x.array)), ns.Q_map)))
+    assert np.allclose(xw[ns.V_map.reshape(-1, dim)[:, 0] // (dim + 1)], xv)
+    assert np.allclose(xw[ns.Q_map // (dim + 1)], xq)
+    assert np.array_equal(ns.V_map.reshape(-1, dim) % (dim + 1), np.tile(np.arange(dim), (len(xv), 1)))
+    f = fem.Function(ns.V)
+    f.interpolate(lambda x: np.stack([x[i] + 10 * i for i in range(dim)]))
+    ns.U.x.array[ns.V_map] = f.x.array
+    assert np.allclose(ns.u.x.array, f.x.array)

@@ -129,3 +129,12 @@ def test_a_solve_stopped_below_the_nonlinear_atol_is_accepted():
     with pytest.raises(LinearSolveError, match="reason -3"):
         check_converged(ksp, step=1, time=0.0, atol=1e-14)
     check_converged(ksp, step=1, time=0.0, atol=1e-6)
+
+
+def test_incomplete_factorisations_get_a_block_matrix_and_the_rest_aij():
+    from fcm_fsi.fluid import solvers
+    assert solvers.matrix_type(solvers.ITERATIVE_2D) == "baij"
+    assert solvers.matrix_type(solvers.ITERATIVE_3D) == "baij"
+    assert solvers.matrix_type({"pc_type": "ilu"}) == "baij"
+    for opts in (solvers.DIRECT_LU, solvers.SCHUR_AMG, solvers.SCHUR_GAMG, {"pc_type": "bjacobi", "sub_pc_type": "lu"}):
+        assert solvers.matrix_type(opts) is None

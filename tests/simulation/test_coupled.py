@@ -537,3 +537,28 @@ def test_implicit_quasi_newton_run_restarts_to_the_uninterrupted_run(tmp_path):
     np.testing.assert_array_equal(r["coupling_iterations"], s["coupling_iterations"])
     assert abs(r["b0_y"][-1] - s["b0_y"][-1]) < 1e-12
     assert abs(r["b0_vy"][-1] - s["b0_vy"][-1]) < 1e-10
+
+
+def test_a_fixed_block_keeps_its_cut_and_a_moved_one_gets_a_new_one():
+    """The cut, the hidden surfaces and the owners are functions of the poses: at poses equal
+    to the last full rebuild's (a fixed block) the cut stage keeps them and sets only the wall
+    velocity; any change of a pose rebuilds them."""
+    from mpi4py import MPI
+
+    from fcm_fsi.io.timing import StageTimer
+    from fcm_fsi.simulation.coupled import CoupledModel
+
+    data = coarse_case()
+    data["dem"]["blocks"][0]["fixed"] = True
+    model = CoupledModel(case_from_dict(data), MPI.COMM_WORLD)
+    cut = model.cuts.cut
+    calls = []
+    update = cut.update
+    cut.update = lambda *a, **k: calls.append(1) or update(*a, **k)   # count the full rebuilds
+    stats = model.cuts.stats
+    for k in range(2):
+        model.advance(0.002 * k, 0.002, StageTimer())
+    assert not calls and model.cuts.stats == stats
+    model.system.state.pos[0, 1] += 1e-3
+    model.cuts.rebuild()
+    assert len(calls) == 1 and model.cuts.stats != stats

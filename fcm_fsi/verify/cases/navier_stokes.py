@@ -86,7 +86,7 @@ def _taylor_green_run(comm, n: int, dt: float, t_end: float, nu: float, tm=None,
     d = np.exp(-2 * np.pi ** 2 * nu * ns.t)
     ue = ufl.as_vector([-ufl.cos(ufl.pi * x[0]) * ufl.sin(ufl.pi * x[1]) * d,
                         ufl.sin(ufl.pi * x[0]) * ufl.cos(ufl.pi * x[1]) * d])
-    u, _ = ufl.split(ns.U)
+    u, _ = ns.split(ns.U)
     err2 = fem.assemble_scalar(fem.form(ufl.inner(u - ue, u - ue) * ufl.dx(metadata={"quadrature_degree": 6})))
     return ns, float(np.sqrt(comm.allreduce(err2, op=MPI.SUM)))
 
