@@ -4,7 +4,10 @@
 The update of a smooth flow changes slowly from step to step, so its extrapolation leaves a small
 part of ‖b‖ for the Krylov method to remove (the 2D dam break at a/20: 22 GMRES iterations per
 step instead of 26). The stopping rule, ‖b − A dU‖ ≤ rtol ‖b‖, does not depend on the start, so
-neither does the accuracy of the solve.
+neither does the accuracy of the solve. A step taken again with the same Δt (an implicit
+coupling's later pass) starts from its own last update and solves for that start's correction
+(:meth:`fcm_fsi.fluid.navier_stokes.NavierStokes._krylov_system`): the pass then resolves the
+response of the flow to the changed wall velocity.
 """
 from __future__ import annotations
 
@@ -52,6 +55,10 @@ class IncrementHistory:
 
     def guess(self, step: int, dt: float) -> np.ndarray | None:
         return extrapolated_increment(self.last, self.before, step, dt)
+
+    def retaken(self, step: int, dt: float) -> bool:
+        """Whether ``step`` was taken before with the same Δt (its update is the newest)."""
+        return self.last is not None and self.last.step == step and self.last.dt == dt
 
     def clear(self) -> None:
         self.last = self.before = None
