@@ -206,8 +206,10 @@ class NavierStokes:
         self._preconditioner_built: int | None = None   # step whose first solve built the preconditioner
         self._last_krylov = 0                           # Krylov iterations of the last solve
         self._guess: np.ndarray | None = None           # start of the next step's iteration (warm_start)
-        # the linearised step's Krylov solve starts from its update extrapolated from the last steps'
-        self.increments = IncrementHistory() if opts.get("ksp_type") != "preonly" else None
+        # fluid.krylov_start: extrapolated: the linearised step's Krylov solve starts from its update
+        # extrapolated from the last steps'
+        krylov = opts.get("ksp_type") != "preonly"
+        self.increments = IncrementHistory() if krylov and config.krylov_start == "extrapolated" else None
         self._correction = None        # work vectors of a retaken step's correction solve
         self._leftover = None          # (step, Δt, b − A dU) the last linearised solve left
 
