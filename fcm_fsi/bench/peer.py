@@ -65,8 +65,10 @@ def interfoam(level: str, ranks: int, out: Path) -> dict:
 
 
 IMPACT_CASE = Path(__file__).resolve().parents[2] / "cases" / "impact_box_3d.yaml"
-#: the fast step for the 3D impact (coupled: the block is fixed)
-IMPACT_FAST = ("fluid.nonlinear=linearised", "phase_field.picard_max_iterations=1", "output.xdmf=false")
+#: the fast step for the 3D impact (coupled: the block is fixed, so no passes), the Krylov solve
+#: started from the extrapolated update (0.35 m cells: 26.6 s against 28.5 s from zero, the same impulse)
+IMPACT_FAST = ("fluid.nonlinear=linearised", "fluid.krylov_start=extrapolated", "phase_field.picard_max_iterations=1",
+               "output.xdmf=false")
 
 
 def hex_size(cells: int) -> float:

@@ -107,6 +107,8 @@ class ImplicitIteration:
                 break
             guess = fixed_point.next_guess(guess, result)
         else:
-            log.debug("t = %.6g s: coupling iteration not converged after %d passes (residual %.2e)",
-                      t, cp.iterations, self.residual)
+            log.warning("t = %.6g s: the implicit coupling did not converge in %d passes (residual %.2e > "
+                        "coupling.iteration_tol %.2e); the step is taken with the last pass. Repeated, this precedes "
+                        "a blow-up: raise coupling.iterations or lower run.cfl", t, cp.iterations, self.residual,
+                        cp.iteration_tol)
         return load
