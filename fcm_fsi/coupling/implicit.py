@@ -71,6 +71,7 @@ class ImplicitIteration:
     def __init__(self, coupling, walls, gyration: np.ndarray) -> None:
         self.coupling, self.walls, self.gyration = coupling, walls, gyration
         self.iterations_done, self.residual = 1, 0.0
+        self.unconverged = 0          # steps that ended without meeting iteration_tol
 
     def unknown(self) -> np.ndarray:
         """The iterated unknown [m/s], flattened: per block V and Ω × radius of gyration."""
@@ -107,8 +108,11 @@ class ImplicitIteration:
                 break
             guess = fixed_point.next_guess(guess, result)
         else:
-            log.warning("t = %.6g s: the implicit coupling did not converge in %d passes (residual %.2e > "
-                        "coupling.iteration_tol %.2e); the step is taken with the last pass. Repeated, this precedes "
-                        "a blow-up: raise coupling.iterations or lower run.cfl", t, cp.iterations, self.residual,
-                        cp.iteration_tol)
+            # the first time as a warning, then at debug level (series.csv: coupling_residual of every step)
+            report = log.debug if self.unconverged else log.warning
+            self.unconverged += 1
+            report("t = %.6g s: the implicit coupling did not converge in %d passes (residual %.2e > "
+                   "coupling.iteration_tol %.2e); the step is taken with the last pass (later ones: series.csv, "
+                   "coupling_residual). Residuals far above the tolerance in a row precede a blow-up: raise "
+                   "coupling.iterations or lower run.cfl", t, cp.iterations, self.residual, cp.iteration_tol)
         return load
