@@ -84,7 +84,7 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
                      former_names: bool = False) -> str:
     """Hash of the resolved case, ignoring what a restart may change: end time, cadence, output,
     and how the linear systems are solved (``fluid.petsc``, ``fluid.reuse_preconditioner``,
-    ``fluid.preconditioner_steps``, ``fluid.preconditioner_max_iterations``,
+    ``fluid.preconditioner_steps``, ``fluid.preconditioner_max_iterations``, ``fluid.krylov_start``,
     ``phase_field.petsc`` — e.g. a direct solver after an iterative one broke down; they change
     the solution only at solver tolerance) and ``run.cfl_gas`` (a restart may loosen the step rule
     in the gas when spurious gas jets throttle a run; it changes the solution at the level of the
@@ -104,7 +104,7 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
         for section, keys in (("fluid", ("petsc", "reuse_preconditioner")), ("phase_field", ("petsc",))):
             for key in keys:
                 (data.get(section) or {}).pop(key, None)
-    for key in ("preconditioner_steps", "preconditioner_max_iterations"):   # solver options
+    for key in ("preconditioner_steps", "preconditioner_max_iterations", "krylov_start"):   # solver options
         (data.get("fluid") or {}).pop(key, None)
     data["run"].pop("cfl_gas", None)   # the gas's Courant bound: a restart may loosen it
     # how the coupling's fixed point is solved: changes the solution at iteration_tol
