@@ -56,9 +56,5 @@ class IncrementHistory:
     def guess(self, step: int, dt: float) -> np.ndarray | None:
         return extrapolated_increment(self.last, self.before, step, dt)
 
-    def retaken(self, step: int, dt: float) -> bool:
-        """Whether ``step`` was taken before with the same Δt (its update is the newest)."""
-        return self.last is not None and self.last.step == step and self.last.dt == dt
-
     def clear(self) -> None:
         self.last = self.before = None

@@ -210,7 +210,7 @@ class NavierStokes:
         # extrapolated from the last steps'
         krylov = opts.get("ksp_type") != "preonly"
         self.increments = IncrementHistory() if krylov and config.krylov_start == "extrapolated" else None
-        self._correction = None        # work vectors of a retaken step's correction solve
+        self._correction = None        # (rhs, solution) work vectors of a retaken step's correction solve
         self._leftover = None          # (step, Δt, b − A dU) the last linearised solve left
 
     def field_index_sets(self) -> dict[str, PETSc.IS]:
@@ -472,7 +472,8 @@ class NavierStokes:
         if r > self.config.atol:
             dt = float(self.dt.value)
             start = None if self.increments is None else self.increments.guess(self.step_count, dt)
-            retaken = self.increments is not None and self.increments.retaken(self.step_count, dt)
+            # taken before with this Δt (an implicit coupling's later pass): its last solve's leftover is kept
+            retaken = self._leftover is not None and self._leftover[:2] == (self.step_count, dt)
             self._update(info, assemble=True, reuse=keep, start=start, from_start=retaken)
             if self.increments is not None:
                 self.increments.record(self.step_count, dt, self.dU.x.array)
@@ -532,32 +533,27 @@ class NavierStokes:
         differ by less than rtol ‖b‖ accepted dU₀ untouched, and the coupling iterated on a flow
         that did not respond to the wall velocity.) A correction whose right-hand side is within the
         step's ``atol`` or at round-off (1e-12 ‖b‖) is zero: returns (None, None)."""
-        leftover = self._leftover
-        if start is None or not from_start or leftover is None or leftover[:2] != (self.step_count, float(self.dt.value)):
+        if start is None or not from_start:
             if start is not None:
                 self.dU.x.array[:] = start
             if self.increments is not None:
                 self.ksp.setInitialGuessNonzero(start is not None)
             return self.b, self.dU.vector
         self.dU.x.array[:] = start
-        rhs, x = self._work_vectors()
+        if self._correction is None:
+            self._correction = (self.b.duplicate(), self.b.duplicate())
+        rhs, x = self._correction
         self.A.mult(self.dU.vector, rhs)
         rhs.aypx(-1.0, self.b)                            # R − J dU₀
-        rhs.axpy(-1.0, leftover[2])
+        rhs.axpy(-1.0, self._leftover[2])
         if rhs.norm() <= max(self.config.atol, 1e-12 * self.b.norm()):
             return None, None
         self.ksp.setInitialGuessNonzero(False)
         return rhs, x
 
-    def _work_vectors(self) -> tuple[PETSc.Vec, PETSc.Vec]:
-        if self._correction is None:
-            self._correction = (self.b.duplicate(), self.b.duplicate(), self.b.duplicate())
-        return self._correction[:2]
-
     def _keep_leftover(self, dt: float) -> None:
         """Keep the residual b − A dU the solve just left (:meth:`_krylov_system`)."""
-        self._work_vectors()
-        e = self._correction[2]
+        e = self.b.duplicate() if self._leftover is None else self._leftover[2]
         self.A.mult(self.dU.vector, e)
         e.aypx(-1.0, self.b)
         self._leftover = (self.step_count, dt, e)
