@@ -22,6 +22,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .. import jit
 from ..config.fluid import BoundaryCondition, FluidConfig
 from ..fluid import solvers
 from ..fluid.navier_stokes import NavierStokes
@@ -54,8 +55,8 @@ def poisson_seconds(mesh) -> tuple[float, int]:
     facets = dmesh.locate_entities_boundary(mesh, fdim, lambda x: np.full(x.shape[1], True))
     bc = fem.dirichletbc(PETSc.ScalarType(0), fem.locate_dofs_topological(V, fdim, facets), V)
     u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
-    a = fem.form(ufl.inner(ufl.grad(u), ufl.grad(v)) * ufl.dx)
-    L = fem.form(v * ufl.dx)
+    a = jit.form(ufl.inner(ufl.grad(u), ufl.grad(v)) * ufl.dx)
+    L = jit.form(v * ufl.dx)
     A = fem.petsc.assemble_matrix(a, bcs=[bc])
     A.assemble()
     b = fem.petsc.assemble_vector(L)

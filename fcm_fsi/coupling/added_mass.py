@@ -39,6 +39,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .. import jit
 from ..fluid.solvers import DIRECT_LU, make_ksp
 from ..fluid.solvers import solve as solve_ksp
 from ..fluid.tagged_form import TaggedForm
@@ -101,13 +102,13 @@ class PotentialAddedMass:
         self._c_forms = [TaggedForm(f * p * v0 * cut.dGamma) for f in [n[j] for j in range(gdim)] + moments]
         # stored zeros on every cell: the cut cells move, and PETSc drops entries outside the
         # structure of the first assembly
-        zero = fem.form(fem.Constant(mesh, PETSc.ScalarType(0.0)) * p * v0 * cut.dx_q)
+        zero = jit.form(fem.Constant(mesh, PETSc.ScalarType(0.0)) * p * v0 * cut.dx_q)
         self._C = [fem.petsc.assemble_matrix(zero) for _ in self._c_forms]
         for C in self._C:
             C.assemble()
         self.chi = fem.Function(D0)
         self._dg0_dofs = D0.dofmap.list.array           # cell → DG0 dof (owned cells first)
-        self._b = [fem.petsc.create_vector(fem.form(q * cut.dx)) for _ in range(rigid_modes(gdim))]
+        self._b = [fem.petsc.create_vector(jit.form(q * cut.dx)) for _ in range(rigid_modes(gdim))]
         self._p = self._b[0].duplicate()
         self._tmp = self._b[0].duplicate()
         self.last_solves = 0

@@ -19,6 +19,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from .. import jit
 from ..dem.state import kinetic_energy
 from ..fluid.probes import liquid_height
 
@@ -68,7 +69,7 @@ class CoupledDiagnostics:
         waterline for its draft, away from the walls' standing waves."""
         cut, pf = self.cuts.cut, self.fluid.pf
         cf = cut.fluid_fraction
-        self._water_forms = (fem.form(pf.phi * cf * cut.dx_q), fem.form(pf.phi * (1 - cf) * cut.dx_q))
+        self._water_forms = (jit.form(pf.phi * cf * cut.dx_q), jit.form(pf.phi * (1 - cf) * cut.dx_q))
         self.units.update({"water_fluid_part": "m^d", "water_in_blocks": "m^d", "water_fluid_error": "-",
                            "liquid_volume_fluid": "m^d", "liquid_volume_error": "-"})
         if self.gdim == 2 and self.nb > 0:
@@ -165,7 +166,7 @@ class CoupledDiagnostics:
         along = x @ (g / gn) if gn > 0 else np.zeros(len(x))
         lo = self.comm.allreduce(float(along.min(initial=np.inf)), op=MPI.MIN)
         hi = self.comm.allreduce(float(along.max(initial=-np.inf)), op=MPI.MAX)
-        mass = self.comm.allreduce(fem.assemble_scalar(fem.form(self.rho * ufl.dx(domain=mesh))), op=MPI.SUM)
+        mass = self.comm.allreduce(fem.assemble_scalar(jit.form(self.rho * ufl.dx(domain=mesh))), op=MPI.SUM)
         moving = ~self.dem.system.state.fixed
         mass += float(self.mass[moving].sum()) / self.depth
         return fluid_kinetic + self.block_kinetic_energy() + gn * mass * (hi - lo)

@@ -34,6 +34,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from .. import jit
 from .moments import fitted_weights
 
 #: quadrature degree of all fluid forms on a cut mesh: the smallest standard rule with at
@@ -233,10 +234,10 @@ class CutGeometry:
 
     def fluid_volume(self) -> float:
         """∫ 1 over the fluid part by the fitted weights (equals the exact cut measure)."""
-        vol = fem.assemble_scalar(fem.form(self.fluid_fraction * self.dx_q))
+        vol = fem.assemble_scalar(jit.form(self.fluid_fraction * self.dx_q))
         return float(self.comm.allreduce(vol, op=MPI.SUM))
 
     def surface_area(self) -> float:
         """∫_Γ 1 by the fitted surface weights (equals the exact cut-surface measure)."""
-        val = fem.assemble_scalar(fem.form(self.surface_weight * self.dx_q))
+        val = fem.assemble_scalar(jit.form(self.surface_weight * self.dx_q))
         return float(self.comm.allreduce(val, op=MPI.SUM))

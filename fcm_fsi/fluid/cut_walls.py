@@ -35,6 +35,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from .. import jit
 from ..fcm.domain import CutGeometry, CutStatistics
 from .ns_forms import cell_size, momentum_residual
 from .tagged_form import TaggedForm
@@ -144,7 +145,7 @@ class CutDomain(CutGeometry):
         by the solid fraction (collective)."""
         if self._inside_form is None or self._inside_form[0] is not phi:
             liquid = ufl.conditional(ufl.ge(phi, 0.5), 1.0, 0.0)
-            self._inside_form = (phi, fem.form(liquid * (1 - self.fluid_fraction) * self.dx_q))
+            self._inside_form = (phi, jit.form(liquid * (1 - self.fluid_fraction) * self.dx_q))
         return self.comm.allreduce(fem.assemble_scalar(self._inside_form[1]), op=MPI.SUM)
 
     def penalty_coefficient(self, parts, h):

@@ -31,6 +31,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .. import jit
 from . import solvers
 
 #: P2 Poisson solve; tight, because the solve error of Π acts as a force on the fluid. The matrix
@@ -62,8 +63,8 @@ class StaticPressure:
         f = fem.Constant(mesh, np.asarray(gravity, dtype=PETSc.ScalarType))
         Pt, s = ufl.TrialFunction(P2), ufl.TestFunction(P2)
         dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": 2})
-        self._a = fem.form(ufl.inner(ufl.grad(Pt), ufl.grad(s)) * dx)
-        self._L = fem.form(ufl.inner(rho * f, ufl.grad(s)) * dx)
+        self._a = jit.form(ufl.inner(ufl.grad(Pt), ufl.grad(s)) * dx)
+        self._L = jit.form(ufl.inner(rho * f, ufl.grad(s)) * dx)
         fdim = mesh.topology.dim - 1
         natural = ns.bc_set.natural_facets
         if ns.comm.allreduce(len(natural), op=MPI.SUM):

@@ -25,6 +25,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .. import jit
 from ..config.fluid import FluidConfig
 from ..io.logging import get_logger
 from . import solvers
@@ -283,7 +284,7 @@ class NavierStokes:
         pts = V0.element.interpolation_points()
         ts, tc = tau_expressions(self.u_adv, self.rho, self.mu, self.h, self.dt,
                                  self.config.stabilization.time_term)
-        return fem.Expression(ts, pts), fem.Expression(tc, pts)
+        return jit.expression(ts, pts), jit.expression(tc, pts)
 
     # ------------------------------------------------------------ time stepping
     def split(self, U):
@@ -608,5 +609,5 @@ class NavierStokes:
     def divergence_l2(self) -> float:
         """‖∇·u‖_L2 of the current velocity (1/s)."""
         u, _ = self.split(self.U)
-        val = fem.assemble_scalar(fem.form(ufl.div(u) ** 2 * self.dx))
+        val = fem.assemble_scalar(jit.form(ufl.div(u) ** 2 * self.dx))
         return float(np.sqrt(self.comm.allreduce(val, op=MPI.SUM)))

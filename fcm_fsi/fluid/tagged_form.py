@@ -3,7 +3,7 @@
 A dolfinx 0.5 form fixes the cells of each integral ``dx(i)`` when it is built. The cut fluid
 domain (:mod:`fcm_fsi.fcm.domain`) integrates uncut cells with the plain rule and cut cells with
 moment-fitted weights, and which cells are cut moves with the bodies. :class:`TaggedForm`
-compiles the UFL form once (FFCx JIT) and rebuilds only the cheap C++ form object, with the
+compiles the UFL form once (FFCx JIT, with :mod:`fcm_fsi.jit`'s flags) and rebuilds only the cheap C++ form object, with the
 same kernels and coefficients, whenever the values of its cell tags have changed in place.
 Use ``.form`` at assembly time; it is always current.
 """
@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 import ufl
-from dolfinx import cpp, fem, jit
+from dolfinx import cpp, fem
+from dolfinx import jit as dolfinx_jit
 from petsc4py import PETSc
+
+from .. import jit
 
 _INTEGRAL_TYPES = {"cell": cpp.fem.IntegralType.cell, "exterior_facet": cpp.fem.IntegralType.exterior_facet,
                    "interior_facet": cpp.fem.IntegralType.interior_facet, "vertex": cpp.fem.IntegralType.vertex}
@@ -34,7 +37,8 @@ class TaggedForm:
         data = sd[domain]
         self.mesh = domain.ufl_cargo()
         params = {"scalar_type": "double"}
-        self._ufcx, self._module, self._code = jit.ffcx_jit(self.mesh.comm, ufl_form, form_compiler_params=params)
+        self._ufcx, self._module, self._code = dolfinx_jit.ffcx_jit(self.mesh.comm, ufl_form, form_compiler_params=params,
+                                                                    jit_params=jit.jit_parameters())
         self._spaces = [arg.ufl_function_space()._cpp_object for arg in ufl_form.arguments()]
         original = ufl_form.coefficients()
         self._coefficients = [original[self._ufcx.original_coefficient_position[i]]._cpp_object

@@ -41,6 +41,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .. import jit
 from ..config.case import Case
 from ..config.fluid import FluidConfig
 from ..config.mesh import box_boundary_names
@@ -159,18 +160,18 @@ class TwoPhaseModel:
         comm = self.mesh.comm
 
         def measure(name):
-            return comm.allreduce(fem.assemble_scalar(fem.form(one * ds(tagged.names[name]))), op=MPI.SUM)
+            return comm.allreduce(fem.assemble_scalar(jit.form(one * ds(tagged.names[name]))), op=MPI.SUM)
         vertical = hi[-1] - lo[-1]
         bottom = box_boundary_names(self.gdim)[-2]   # the lower plane of the last (vertical) axis
-        self._phi_forms = {"level_left": (fem.form(self.pf.phi * ds(tagged.names["xmin"])), measure("xmin") / vertical),
-                           "level_right": (fem.form(self.pf.phi * ds(tagged.names["xmax"])),
+        self._phi_forms = {"level_left": (jit.form(self.pf.phi * ds(tagged.names["xmin"])), measure("xmin") / vertical),
+                           "level_right": (jit.form(self.pf.phi * ds(tagged.names["xmax"])),
                                            measure("xmax") / vertical),
-                           "wetted_bottom": (fem.form(self.pf.phi * ds(tagged.names[bottom])),
+                           "wetted_bottom": (jit.form(self.pf.phi * ds(tagged.names[bottom])),
                                              measure(bottom) / (hi[0] - lo[0]))}
-        self._p_bottom = (fem.form(p * ds(tagged.names[bottom])), measure(bottom))
+        self._p_bottom = (jit.form(p * ds(tagged.names[bottom])), measure(bottom))
         u, _ = self.ns.split(self.ns.U)
         dx = ufl.Measure("dx", domain=self.mesh, metadata={"quadrature_degree": 3})
-        self._kinetic = fem.form(0.5 * self.rho * ufl.inner(u, u) * dx)
+        self._kinetic = jit.form(0.5 * self.rho * ufl.inner(u, u) * dx)
 
     def update_properties(self, phi_values: np.ndarray) -> None:
         """ρ, μ from φ (eqs 12–13, clipped) at the nodes."""

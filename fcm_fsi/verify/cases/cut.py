@@ -29,6 +29,7 @@ from dolfinx import fem
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
+from ... import jit
 from ...dem.bodies import axis_angle_quat
 from ...fcm.cut import cut_measures
 from ...fcm.levelset import Shapes, StructureLevelSet
@@ -123,8 +124,8 @@ def assembled_xy_moment(cut: CutDomain) -> float:
     ∫ x y cut.dx = (1 − α) ∫_fluid x y + α ∫_Ω x y, the last exact by the plain rule."""
     X = ufl.SpatialCoordinate(cut.mesh)
     f = X[0] * X[1]
-    weighted = fem.assemble_scalar(fem.form(f * cut.dx))
-    plain = fem.assemble_scalar(fem.form(f * cut.dx_q))
+    weighted = fem.assemble_scalar(jit.form(f * cut.dx))
+    plain = fem.assemble_scalar(jit.form(f * cut.dx_q))
     weighted, plain = (cut.comm.allreduce(v, op=MPI.SUM) for v in (weighted, plain))
     return (weighted - cut.alpha * plain) / (1 - cut.alpha)
 

@@ -15,6 +15,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from ... import jit
 from ...config.fluid import BoundaryCondition, FluidConfig, StabilizationConfig
 from ...fluid.forces import ReactionForce, probe
 from ...fluid.navier_stokes import NavierStokes
@@ -87,7 +88,7 @@ def _taylor_green_run(comm, n: int, dt: float, t_end: float, nu: float, tm=None,
     ue = ufl.as_vector([-ufl.cos(ufl.pi * x[0]) * ufl.sin(ufl.pi * x[1]) * d,
                         ufl.sin(ufl.pi * x[0]) * ufl.cos(ufl.pi * x[1]) * d])
     u, _ = ns.split(ns.U)
-    err2 = fem.assemble_scalar(fem.form(ufl.inner(u - ue, u - ue) * ufl.dx(metadata={"quadrature_degree": 6})))
+    err2 = fem.assemble_scalar(jit.form(ufl.inner(u - ue, u - ue) * ufl.dx(metadata={"quadrature_degree": 6})))
     return ns, float(np.sqrt(comm.allreduce(err2, op=MPI.SUM)))
 
 
@@ -95,7 +96,7 @@ def _l2_diff(ns_a: NavierStokes, ns_b: NavierStokes) -> float:
     """‖u_a − u_b‖_L2 for two solutions on the same mesh."""
     diff = fem.Function(ns_a.V)
     diff.x.array[:] = ns_a.U.x.array[ns_a.V_map] - ns_b.U.x.array[ns_b.V_map]
-    e2 = fem.assemble_scalar(fem.form(ufl.inner(diff, diff) * ufl.dx(metadata={"quadrature_degree": 2})))
+    e2 = fem.assemble_scalar(jit.form(ufl.inner(diff, diff) * ufl.dx(metadata={"quadrature_degree": 2})))
     return float(np.sqrt(ns_a.comm.allreduce(e2, op=MPI.SUM)))
 
 

@@ -9,6 +9,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from ... import jit
 from ...config import case_from_dict
 from ...io.csv import read_series  # noqa: F401  (re-exported: the verification cases read their CSVs through it)
 from ...simulation.loop import TimeLoop
@@ -62,7 +63,7 @@ def shape_error_l1(model: PhaseFieldModel, phi0: np.ndarray) -> float:
     """∫|φ(T) − φ(0)| dx divided by the initial interface measure [m]."""
     ref = fem.Function(model.pf.V)
     ref.x.array[:] = phi0
-    err = fem.assemble_scalar(fem.form(abs(model.pf.phi - ref) * ufl.dx(metadata={"quadrature_degree": 2})))
+    err = fem.assemble_scalar(jit.form(abs(model.pf.phi - ref) * ufl.dx(metadata={"quadrature_degree": 2})))
     err = model.mesh.comm.allreduce(err, op=MPI.SUM)
     from ...fluid.phase_field import liquid_volume_and_area
     _, length0 = liquid_volume_and_area(model.pf.geometry, phi0, model.mesh.comm)
