@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "fcm_fsi"
 
 #: package (first name under fcm_fsi) → layer
-LAYER = {"config": 0, "geometry": 0, "mesh": 1, "fcm": 2, "fluid": 3, "dem": 3, "pd": 3, "coupling": 4, "simulation": 5,
+LAYER = {"config": 0, "geometry": 0, "jit": 0, "mesh": 1, "fcm": 2, "fluid": 3, "dem": 3, "pd": 3, "coupling": 4, "simulation": 5,
          "verify": 6, "bench": 6, "tools": 6, "cli": 6, "preflight": 6, "api": 6, "__main__": 6, "__init__": 6}
 TOP = max(LAYER.values())
 #: the utility package and the only packages it may import
