@@ -66,9 +66,10 @@ def interfoam(level: str, ranks: int, out: Path) -> dict:
 
 IMPACT_CASE = Path(__file__).resolve().parents[2] / "cases" / "impact_box_3d.yaml"
 #: the fast step for the 3D impact (coupled: the block is fixed, so no passes), the Krylov solve
-#: started from the extrapolated update (0.35 m cells: 26.6 s against 28.5 s from zero, the same impulse)
+#: started from the extrapolated update, Courant number 1 (interFoam's maxCo) with the step growing
+#: by at most 20 % (as the 2D fast step; docs/performance.md has the load at Courant number 0.4 too)
 IMPACT_FAST = ("fluid.nonlinear=linearised", "fluid.krylov_start=extrapolated", "phase_field.picard_max_iterations=1",
-               "output.xdmf=false")
+               "run.cfl=1.0", "run.dt_growth=1.2", "output.xdmf=false")
 
 
 def hex_size(cells: int) -> float:
