@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from dolfinx import fem
+from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from ..config.fluid import BoundaryCondition
@@ -76,10 +77,15 @@ class BCSet:
             upd(t)
 
 
-def velocity_bc(ns, facets: np.ndarray, fn: Callable[[np.ndarray, float], np.ndarray], bcset: BCSet) -> None:
-    """Time-dependent velocity u = fn(x, t) on the given facets (all components)."""
-    fdim = ns.mesh.topology.dim - 1
-    gdim = ns.mesh.geometry.dim
+def velocity_bc(ns, facets: np.ndarray, fn: Callable[[np.ndarray, float], np.ndarray], bcset: BCSet,
+                steady: bool = False) -> None:
+    """Velocity u = fn(x, t) on the given facets (all components); ``steady``: fn does not depend
+    on t, so it is interpolated once. The values are interpolated on the cells at the facets only."""
+    mesh = ns.mesh
+    fdim = mesh.topology.dim - 1
+    gdim = mesh.geometry.dim
+    mesh.topology.create_connectivity(fdim, fdim + 1)
+    cells = dmesh.compute_incident_entities(mesh, facets, fdim, fdim + 1)
     g = fem.Function(ns.V)
     w_to_v = np.empty(len(ns.U.x.array), dtype=np.int32)     # W index of a velocity dof → V index
     w_to_v[ns.V_map] = np.arange(len(ns.V_map), dtype=np.int32)
@@ -90,9 +96,10 @@ def velocity_bc(ns, facets: np.ndarray, fn: Callable[[np.ndarray, float], np.nda
         bcset.bcs.append(fem.dirichletbc(g, [w_dofs, w_to_v[w_dofs]], W_i))
 
     def update(t: float) -> None:
-        g.interpolate(lambda x: fn(x, t))
+        g.interpolate(lambda x: fn(x, t), cells)
     update(ns.t)
-    bcset.updaters.append(update)
+    if not steady:
+        bcset.updaters.append(update)
 
 
 def _one(ns, bc: BoundaryCondition, bcset: BCSet) -> None:
@@ -102,12 +109,13 @@ def _one(ns, bc: BoundaryCondition, bcset: BCSet) -> None:
     if bc.kind == "do_nothing":
         return
     if bc.kind == "no_slip":
-        velocity_bc(ns, facets, lambda x, t: np.zeros((gdim, x.shape[1])), bcset)
+        velocity_bc(ns, facets, lambda x, t: np.zeros((gdim, x.shape[1])), bcset, steady=True)
     elif bc.kind == "velocity":
         if len(bc.value) != gdim:
             raise ConfigError(f"key 'fluid.boundaries': {bc.boundary!r} value {list(bc.value)} needs {gdim} entries")
         val = np.asarray(bc.value, dtype=float)[:, None]
-        velocity_bc(ns, facets, lambda x, t: np.tile(val * _ramp(t, bc.ramp_time), (1, x.shape[1])), bcset)
+        velocity_bc(ns, facets, lambda x, t: np.tile(val * _ramp(t, bc.ramp_time), (1, x.shape[1])), bcset,
+                    steady=bc.ramp_time <= 0)
     elif bc.kind == "parabolic_inflow":
         axis, sign, lo, hi = _flat_axis(ns, bc.boundary, facets)
 
@@ -120,7 +128,7 @@ def _one(ns, bc: BoundaryCondition, bcset: BCSet) -> None:
             out = np.zeros((gdim, x.shape[1]))
             out[axis] = sign * prof
             return out
-        velocity_bc(ns, facets, profile, bcset)
+        velocity_bc(ns, facets, profile, bcset, steady=bc.ramp_time <= 0)
     elif bc.kind == "slip":
         axis, _, _, _ = _flat_axis(ns, bc.boundary, facets)
         W_i = ns.velocity_subspace(axis)
