@@ -72,6 +72,7 @@ class ImplicitIteration:
         self.coupling, self.walls, self.gyration = coupling, walls, gyration
         self.iterations_done, self.residual = 1, 0.0
         self.unconverged = 0          # steps that ended without meeting iteration_tol
+        self.history: list[float] = []    # the residual after each pass of the last step
 
     def unknown(self) -> np.ndarray:
         """The iterated unknown [m/s], flattened: per block V and Ω × radius of gyration."""
@@ -89,6 +90,7 @@ class ImplicitIteration:
         cp = self.coupling
         guess = self.unknown()
         fixed_point = accelerator(cp.iteration_method, cp.iteration_relaxation)
+        self.history = []
         for k in range(cp.iterations):
             later = k > 0 and retake
             if k:
@@ -104,6 +106,7 @@ class ImplicitIteration:
             scale = max(float(np.abs(result).max(initial=0.0)), cp.iteration_velocity)
             self.residual = float(np.abs(result - guess).max(initial=0.0)) / scale
             self.iterations_done = k + 1
+            self.history.append(self.residual)
             if self.residual <= cp.iteration_tol:
                 break
             guess = fixed_point.next_guess(guess, result)
@@ -115,4 +118,5 @@ class ImplicitIteration:
                    "coupling.iteration_tol %.2e); the step is taken with the last pass (later ones: series.csv, "
                    "coupling_residual). Residuals far above the tolerance in a row precede a blow-up: raise "
                    "coupling.iterations or lower run.cfl", t, cp.iterations, self.residual, cp.iteration_tol)
+        log.debug("t = %.6g s: coupling residuals %s", t, " ".join(f"{r:.2e}" for r in self.history))
         return load

@@ -131,6 +131,8 @@ class NavierStokes:
         a coefficient constant per cell, e.g. the cut wall's penalty; default ``mu``).
     static_pressure: a known pressure field Π (e.g. the P2 hydrostatic part of
         :mod:`.hydrostatic`); the unknown is then p' and every term uses p' + Π.
+    retaken_steps: the caller takes steps again with the same Δt (an implicit coupling's passes,
+        :meth:`warm_start`): each linearised solve keeps the residual it left for them.
     """
 
     def __init__(self, mesh, config: FluidConfig, dt: float, *, facet_tags=None,
@@ -139,7 +141,7 @@ class NavierStokes:
                  extra_bcs: Sequence[fem.DirichletBC] = (),
                  velocity_functions: dict[str, Callable] | None = None, petsc_prefix: str = "ns_",
                  petsc_options: dict | None = None, pspg_density=None, static_pressure=None,
-                 cell_viscosity=None) -> None:
+                 cell_viscosity=None, retaken_steps: bool = False) -> None:
         self.mesh, self.config, self.comm = mesh, config, mesh.comm
         gdim = mesh.geometry.dim
         self.gdim = gdim
@@ -213,6 +215,7 @@ class NavierStokes:
         self.increments = IncrementHistory() if krylov and config.krylov_start == "extrapolated" else None
         self._correction = None        # (rhs, solution) work vectors of a retaken step's correction solve
         self._leftover = None          # (step, Δt, b − A dU) the last linearised solve left
+        self.retaken_steps = retaken_steps
 
     def field_index_sets(self) -> dict[str, PETSc.IS]:
         """Owned global rows of velocity ("u") and pressure ("p") in the monolithic system, for
@@ -488,7 +491,8 @@ class NavierStokes:
             self._update(info, assemble=True, reuse=keep, start=start, from_start=retaken)
             if self.increments is not None:
                 self.increments.record(self.step_count, dt, self.dU.x.array)
-                self._keep_leftover(dt)
+                if self.retaken_steps:
+                    self._keep_leftover(dt)
             info.iterations = 1
         self.history.append(info)
         return info
