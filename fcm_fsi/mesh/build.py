@@ -2,7 +2,6 @@
 graded away from the structure's faces."""
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -17,21 +16,10 @@ from ..io.logging import get_logger
 log = get_logger("mesh")
 
 
-def reproducible_partition() -> None:
-    """Partition meshes the same way in every run on the same ranks. dolfinx partitions with
-    PT-Scotch, which runs one thread per core unless ``SCOTCH_PTHREAD_NUMBER`` says otherwise,
-    and its threaded partition differs from run to run; so then did every sum over a rank's
-    cells, at round-off, and a run's results with it (a coupled run's bond breaks amplify that).
-    One thread (a user's own setting is kept)."""
-    os.environ.setdefault("SCOTCH_PTHREAD_NUMBER", "1")
-
-
 def build_mesh(cfg: MeshConfig, comm: MPI.Comm, case_dir: Path | None = None,
                face_distance: Callable[[float, float, float], float] | None = None) -> dmesh.Mesh:
-    """Create the background mesh described by ``cfg`` (collective on ``comm``), partitioned
-    the same in every run on the same ranks (:func:`reproducible_partition`).
+    """Create the background mesh described by ``cfg`` (collective on ``comm``).
     ``face_distance(x, y, z)`` [m]: distance to the structure's faces, for ``mesh.structure_band``."""
-    reproducible_partition()
     if cfg.kind == "rectangle":
         if cfg.dim != 2:
             raise ConfigError("key 'mesh.kind' = 'rectangle' needs 2 entries in mesh.lower/upper")

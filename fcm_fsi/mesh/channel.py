@@ -21,7 +21,6 @@ import numpy as np
 from dolfinx import mesh as dmesh
 
 from ..config.mesh import box_boundary_names
-from .build import reproducible_partition
 
 CACHE = Path(__file__).resolve().parents[2] / "meshes" / "cache"
 CHANNEL_NAMES = {"inlet": 1, "outlet": 2, "walls": 3, "cylinder": 4}
@@ -60,7 +59,6 @@ def rectangle(comm, lower=(0.0, 0.0), upper=(1.0, 1.0), n=(32, 32), diagonal: st
     """Structured triangles with boundaries xmin, xmax, ymin, ymax."""
     diag = {"right": dmesh.DiagonalType.right, "left": dmesh.DiagonalType.left,
             "crossed": dmesh.DiagonalType.crossed}[diagonal]
-    reproducible_partition()
     msh = dmesh.create_rectangle(comm, [np.array(lower), np.array(upper)], list(n),
                                  dmesh.CellType.triangle, diagonal=diag)
     return tag_box_boundaries(msh, lower, upper)
@@ -68,7 +66,6 @@ def rectangle(comm, lower=(0.0, 0.0), upper=(1.0, 1.0), n=(32, 32), diagonal: st
 
 def box(comm, lower=(0.0, 0.0, 0.0), upper=(1.0, 1.0, 1.0), n=(8, 8, 8)) -> TaggedMesh:
     """Structured tetrahedra with boundaries xmin, xmax, ymin, ymax, zmin, zmax."""
-    reproducible_partition()
     msh = dmesh.create_box(comm, [np.array(lower), np.array(upper)], list(n), dmesh.CellType.tetrahedron)
     return tag_box_boundaries(msh, lower, upper)
 
@@ -155,7 +152,6 @@ def _build_or_load(comm, key: str, dim: int, builder) -> TaggedMesh:
             tmp = path.with_suffix(f".{os.getpid()}.msh")
             gmsh.write(str(tmp))
             os.replace(tmp, path)
-    reproducible_partition()
     msh, _, facet_tags = gmshio.model_to_mesh(gmsh.model if comm.rank == 0 else None, comm, 0, gdim=dim)
     if comm.rank == 0:
         gmsh.model.remove()

@@ -1,6 +1,6 @@
-"""The mesh partition is the same in every run of a case on the same ranks (mesh/build.py
-reproducible_partition): with PT-Scotch's default threads it was not, and a 2-rank run's results
-then differed from run to run at round-off from the first step on."""
+"""The mesh partition is the same in every run of a case on the same ranks (``import fcm_fsi``
+sets one PT-Scotch thread): with PT-Scotch's default threads it was not, and a 2-rank run's
+results then differed from run to run at round-off from the first step on."""
 import shutil
 import subprocess
 import sys
