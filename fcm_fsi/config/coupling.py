@@ -94,6 +94,17 @@ class CouplingConfig:
                                                   "to it in the fluid's level set only (the DEM keeps their true "
                                                   "size): a wall thinner than about one cell falls between the mesh "
                                                   "nodes and lets water through", ge=0)
+    unresolved_cells: float = param(
+        0.0, doc="a moving block thinner in the fluid (after min_thickness) than this many cell sizes (the "
+                 "mean edge of the cell holding its centre), or whose centre leaves the fluid mesh, is taken "
+                 "out of the fluid's cut from then on and loaded as a point particle: buoyancy and drag "
+                 "(unresolved_drag) from the flow at its centre, no torque; the fluid does not feel it. A block "
+                 "below one cell falls between the mesh nodes and its cut-surface load is spurious "
+                 "(coupling/unresolved.py, docs/coupling.md); 0 = never", ge=0, le=10)
+    unresolved_drag: float = param(
+        1.05, doc="drag coefficient C_d of the unresolved blocks' load ½ ρ C_d A |u − v| (u − v), A the block's "
+                  "area across the relative velocity (a box's projection; other blocks the sphere of their "
+                  "volume); 1.05: a cube face-on (Hoerner, Fluid-Dynamic Drag)", gt=0, le=10)
     force_relaxation: float = param(
         1.0, doc="ω: the DEM gets ω × the new fluid load + (1 − ω) × the load it got last step (torque alike); < 1 "
                  "damps the step-to-step oscillation of the explicit coupling (contact chatter of a block on the "

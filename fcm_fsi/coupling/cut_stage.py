@@ -34,10 +34,14 @@ class CutStage:
     ``shapes`` the blocks as the fluid sees them; ``cut`` the fluid's CutDomain; ``fluid`` the
     fluid model (FluidModel or TwoPhaseModel); ``h_min``, ``h_max`` the smallest and largest
     cell diameters [m]; ``gyration``, ``mass``, ``inertia`` as :class:`WallMotion`'s;
-    ``depth`` [m] the span of a 2D fluid."""
+    ``depth`` [m] the span of a 2D fluid; ``true_half`` the blocks' own half extents where
+    ``shapes`` widens them (``coupling.min_thickness``; the widening is narrowed near the tank's
+    walls, fcm/levelset.narrowed_at_walls); ``unresolved`` the UnresolvedBlocks, whose blocks
+    the level sets leave out."""
 
     def __init__(self, case, comm: MPI.Comm, dem, bonds, shapes, cut, fluid, h_min: float, h_max: float,
-                 gyration: np.ndarray, mass: np.ndarray, inertia: np.ndarray, depth: float) -> None:
+                 gyration: np.ndarray, mass: np.ndarray, inertia: np.ndarray, depth: float,
+                 true_half: np.ndarray | None = None, unresolved=None) -> None:
         cp = case.coupling
         self.case, self.comm, self.dem, self.cut, self.fluid = case, comm, dem, cut, fluid
         self.gdim = cut.gdim
@@ -53,14 +57,17 @@ class CutStage:
                               f"reaches {grid_margin(shapes)[short[0]]:.4g} m beyond its surface, less than the "
                               f"level-set band {self.band:.4g} m (coupling.band, default 2 × the largest cell): "
                               "raise sdf_margin")
-        self.levelset = StructureLevelSet(shapes, nb, self.band, gap=self.gap, walls=gap_walls(case.dem, self.gdim))
+        walls = gap_walls(case.dem, self.gdim)
+        self.levelset = StructureLevelSet(shapes, nb, self.band, gap=self.gap, walls=walls, true_half=true_half)
         self.points = np.zeros((cut.nodes.shape[0], 3))
         self.points[:, : self.gdim] = cut.nodes[:, : self.gdim]
         self.walls = WallMotion(cp, dem, bonds, self.levelset, self.points, gyration, mass, inertia, h_min, self.gdim)
         self.h_min = h_min
+        self.unresolved = unresolved
         plain = None                       # the level set without the fill (vents, hidden pressure)
         if self.gap > 0 and (cp.vent_pockets or cp.drain_pockets) or cp.hidden_pressure != "none":
-            plain = StructureLevelSet(self.levelset.shapes, nb, self.band)
+            plain = StructureLevelSet(self.levelset.shapes, nb, self.band, walls=walls, true_half=true_half)
+        self.plain = plain
         self.pockets = None                # coupling.vent_pockets / drain_pockets
         if self.gap > 0 and (cp.vent_pockets or cp.drain_pockets):
             self.pockets = SealedPockets(case, comm, cut, fluid.ns, plain, self.points, getattr(fluid, "static", None))
@@ -91,6 +98,8 @@ class CutStage:
             self.cut.set_wall_velocity(self.walls.at_nodes(owner, velocities)[0])
             return self.stats
         self._poses = (st.pos.copy(), st.quat.copy())
+        if self.unresolved is not None:
+            self.take_out(self.unresolved.update(self.fluid.ns.t, st.pos))
         level, owner = self.levelset.evaluate(self.points, st.pos, st.quat)
         if self.pockets is not None:
             self.pockets.apply(level, owner, self.levelset, self.walls.fill_free_to_part(owner), st.pos, st.quat,
@@ -103,6 +112,14 @@ class CutStage:
         if hasattr(self.fluid, "follow_cut"):
             self.fluid.follow_cut(self.cut, None if self.pockets is None else self.pockets.cells)
         return self.stats
+
+    def take_out(self, blocks: np.ndarray) -> None:
+        """Leave ``blocks`` out of the level sets from now on (unresolved, point particles)."""
+        if self.unresolved is not None:
+            self.unresolved.unseen[blocks] = True
+        for levelset in (self.levelset, self.plain):
+            if levelset is not None:
+                levelset.unseen[blocks] = True
 
     def node_density(self) -> np.ndarray:
         """Fluid density [kg/m³] at the mesh vertices: from φ with a phase field, else the fluid's."""

@@ -61,6 +61,8 @@ class CoupledDiagnostics:
             self._liquid_columns(h_max)
         if bonds is not None:
             self.units["broken_bonds"] = "-"
+        if cuts.unresolved is not None:
+            self.units["unresolved_blocks"] = "-"
 
     def _liquid_columns(self, h_max: float) -> None:
         """Liquid volume [m^d] in the fluid part and inside the blocks (fitted weights; the
@@ -119,6 +121,8 @@ class CoupledDiagnostics:
                 diag["b0_level_right"] = self.water_level_at(x0 + self._gauge_half_width)
         if self.bonds is not None:
             diag["broken_bonds"] = float(np.count_nonzero(self.bonds.broken_bonds()))
+        if cuts.unresolved is not None:      # blocks out of the cut, loaded as point particles
+            diag["unresolved_blocks"] = float(np.count_nonzero(cuts.unresolved.unseen))
         return diag
 
     def water_level_at(self, x_target: float) -> float:

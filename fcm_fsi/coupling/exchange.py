@@ -29,11 +29,14 @@ class ExchangeStage:
     """The load on the blocks and the exchange check (module docstring). ``case`` the case;
     ``comm`` the fluid's communicator; ``dem`` the DEMSubcycler; ``cut`` the CutDomain; ``ns``
     the NavierStokes solver; ``walls`` the WallMotion; ``hidden`` the HiddenLoad or None;
-    ``added`` the AddedMassStage; ``depth`` [m] the span of a 2D fluid."""
+    ``added`` the AddedMassStage; ``depth`` [m] the span of a 2D fluid; ``unresolved`` the
+    UnresolvedBlocks (their load replaces the cut's, unresolved.py)."""
 
-    def __init__(self, case, comm: MPI.Comm, dem, cut, ns, walls, hidden, added, depth: float) -> None:
+    def __init__(self, case, comm: MPI.Comm, dem, cut, ns, walls, hidden, added, depth: float,
+                 unresolved=None) -> None:
         self.case, self.comm, self.dem, self.cut, self.ns = case, comm, dem, cut, ns
         self.walls, self.hidden, self.added, self.depth = walls, hidden, added, depth
+        self.unresolved = unresolved
         self.gdim = cut.gdim
         nb = dem.system.state.nb
         self.force = np.zeros((nb, 3))      # on each block [N]: the fluid's, with the static load's move
@@ -56,6 +59,10 @@ class ExchangeStage:
         self.torque[:] = torque * self.depth
         if self.hidden is not None:
             self._move_static_load(pressure, node_density, centres)
+        if self.unresolved is not None and self.unresolved.unseen.any():
+            out = self.unresolved.unseen
+            self.force[out] = self.unresolved.load(st.pos, st.vel, st.rotation_matrices())[out]
+            self.torque[out] = 0.0
         self.fluid_side = self._wall_momentum()
         labels = self.walls.cluster_labels() if self.added.from_flow else None   # the flow's groups only
         self.added.update(t, labels, same_poses=same_poses)
@@ -105,6 +112,8 @@ class ExchangeStage:
         # floor's) and the fill's surface load (the fluid's) is not the block's: compare the fluid's own
         fluid_load = self.force if self.hidden is None else \
             self.force - self.hidden.surface_force + self.hidden.cut_force
+        if self.unresolved is not None and self.unresolved.unseen.any():   # the particles' load: not the fluid's
+            fluid_load = np.where(self.unresolved.unseen[:, None], 0.0, fluid_load)
         stabilisation = dem_load - fluid_load
         linear = self.case.coupling.force_mode == "linear"
         prev_stab, prev_fluid = self._previous or (np.zeros_like(stabilisation), self.fluid_side)

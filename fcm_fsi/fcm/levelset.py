@@ -57,6 +57,10 @@ from .shapes import (  # noqa: F401  # noqa: F401 (BOX … grid_margin: re-expor
     grid_margin,
 )
 
+#: |n·a| [-] from which a box axis a facing a plane of normal n takes the whole narrowing of
+#: :func:`narrowed_at_walls` (below it the share falls as (|n·a|/NARROW_TILT)²: 0.12 at 5°)
+NARROW_TILT = 0.25
+
 # --------------------------------------------------------------------------- kernels
 
 @numba.njit(cache=True)
@@ -313,10 +317,14 @@ class StructureLevelSet:
     (point, primitive) candidates read from the bins, and (primitive, cell) listings.
     """
 
-    def __init__(self, shapes: Shapes, nbodies: int, cutoff: float, gap: float = 0.0, walls=None):
+    def __init__(self, shapes: Shapes, nbodies: int, cutoff: float, gap: float = 0.0, walls=None,
+                 true_half: np.ndarray | None = None):
         """``gap`` [m] and ``walls`` (np, 6) (a point and the normal into the fluid per plane):
         fluid gaps narrower than ``gap`` between two bodies, or a body and a wall, count as
-        solid (see :func:`_evaluate`); 0 ≤ gap < cutoff."""
+        solid (see :func:`_evaluate`); 0 ≤ gap < cutoff. ``true_half`` (nshape, 3) [m]: the
+        blocks' own half extents where ``shapes`` widens boxes (``coupling.min_thickness``);
+        each pose then narrows the widening where a block nears a wall
+        (:func:`narrowed_at_walls`)."""
         if not cutoff > 0:
             raise ValueError(f"cutoff = {cutoff}: must be > 0 [m]")
         if not 0.0 <= gap < cutoff:
@@ -331,7 +339,16 @@ class StructureLevelSet:
                              f"{grid_margin(shapes)[short[0]]:.4g} m beyond the surface, less than the cutoff "
                              f"{cutoff:.4g} m (grow the grid's margin)")
         self.shapes = shapes
+        self.true_half = None
+        if true_half is not None:
+            true_half = np.asarray(true_half, np.float64).reshape(len(shapes), 3)
+            if np.any(true_half > shapes.half) or np.any(true_half[shapes.kind != BOX] != shapes.half[shapes.kind != BOX]):
+                raise ValueError("true_half: must not exceed the shapes' half extents, and equal them but for boxes")
+            if np.any(true_half != shapes.half):
+                self.true_half = true_half
         self.nbodies = int(nbodies)
+        #: (nbodies,) bool: bodies the level set leaves out (``coupling.unresolved_cells``; set by the owner)
+        self.unseen = np.zeros(self.nbodies, bool)
         self.cutoff = float(cutoff)
         self._radius = bounding_radius(shapes)
         self._reach = self._radius + self.cutoff
@@ -371,13 +388,56 @@ class StructureLevelSet:
             return phi, owner
         s = self.shapes
         centre, R = _world_frames(s.body, s.offset, s.rot, body_pos, body_quat)
-        lo, dims, cell = _grid(centre, self._reach, self._cell, self._max_cells)
-        start, items = _bin_shapes(centre, self._reach, lo, dims, cell)
-        self.pair_tests = _evaluate(x, s.kind, s.body, s.half, s.grid, s.values, self._radius, centre, R, self.cutoff,
+        half = s.half
+        if self.true_half is not None and len(self.walls):
+            half = narrowed_at_walls(s.half, self.true_half, centre, R, self.walls)
+        kind, body, grid, radius, reach = s.kind, s.body, s.grid, self._radius, self._reach
+        if self.unseen.any():
+            keep = np.flatnonzero((s.body < 0) | ~self.unseen[np.maximum(s.body, 0)])
+            if not keep.size:
+                return phi, owner
+            kind, body, grid, radius, reach = kind[keep], body[keep], grid[keep], radius[keep], reach[keep]
+            half, centre, R = half[keep], centre[keep], R[keep]
+        lo, dims, cell = _grid(centre, reach, self._cell, self._max_cells)
+        start, items = _bin_shapes(centre, reach, lo, dims, cell)
+        self.pair_tests = _evaluate(x, kind, body, half, grid, s.values, radius, centre, R, self.cutoff,
                                     lo, dims, cell, start, items, self.walls, self.gap, phi, owner,
                                     self.fill_other, self.fill_weight, self.second_owner, self.owner_margin)
         self.bin_entries = items.shape[0]
         return phi, owner
+
+
+def narrowed_at_walls(half: np.ndarray, true_half: np.ndarray, centre: np.ndarray, R: np.ndarray,
+                      planes: np.ndarray, tilt: float = NARROW_TILT) -> np.ndarray:
+    """Box half extents (nshape, 3) [m] with each box's widening (``half`` − ``true_half``)
+    narrowed where its true box nears a plane, so that the widened box keeps at least half the
+    true box's distance D from it: a widened block's fluid shape must not meet a tank wall
+    while the block itself is still off it (the fluid between them is squeezed out through a
+    closing wedge at speeds without bound, and pushes the block through the wall).
+
+    ``centre`` (nshape, 3) and ``R`` (nshape, 3, 3) are the boxes' world centres and axes
+    (columns), ``planes`` (np, 6) a point and the unit normal into the fluid. For plane w
+    the widening reaches Δ_w = Σ_k m_k |n_w·a_k| towards it (m = half − true_half, a_k the
+    box axes); where Δ_w > D_w/2 the axes facing it are scaled by α_w = max(D_w, 0)/(2Δ_w),
+    fully for |n_w·a_k| ≥ ``tilt``, by a share (|n_w·a_k|/tilt)² for axes nearly parallel to
+    the plane (so a block standing or leaning on the floor keeps its widening across the
+    floor's normal, and the narrowing is continuous in the pose; such an axis may leave
+    ≤ 0.385 m_k·tilt of the widening past D_w/2). Each axis keeps the least factor over the
+    planes."""
+    boxes = np.flatnonzero(np.any(half > true_half, axis=1))
+    if not boxes.size or not len(planes):
+        return half
+    m = (half - true_half)[boxes]                                            # (nb, 3)
+    n, p = planes[:, 3:], planes[:, :3]                                      # (np, 3)
+    proj = np.abs(np.einsum("wd,bdk->bwk", n, R[boxes]))                     # |n_w · a_k|, (nb, np, 3)
+    distance = ((centre[boxes, None, :] - p[None]) * n[None]).sum(axis=2) - (proj * true_half[boxes, None, :]).sum(axis=2)
+    reach = (proj * m[:, None, :]).sum(axis=2)                               # Δ_w
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alpha = np.where(reach > 0.5 * distance, np.maximum(distance, 0.0) / (2.0 * reach), 1.0)
+    factor = 1.0 - (1.0 - np.clip(alpha, 0.0, 1.0))[:, :, None] * np.minimum(proj / tilt, 1.0) ** 2
+    out = half.copy()
+    out[boxes] = true_half[boxes] + m * factor.min(axis=1)
+    return out
 
 
 class FaceDistance:

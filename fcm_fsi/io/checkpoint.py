@@ -55,6 +55,8 @@ ADDED_OPTIONS: tuple[tuple[str, str, object], ...] = (
     ("dem.generators[].block", "sdf_spacing", None),
     ("dem.generators[].block", "sdf_margin", None),
     ("dem.generators[].block", "grid_size", None),
+    ("coupling", "unresolved_cells", 0.0),
+    ("coupling", "unresolved_drag", 1.05),
 )
 
 

@@ -56,6 +56,14 @@ def longest_edges(x: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return h
 
 
+def cell_mean_edges(msh: dmesh.Mesh) -> np.ndarray:
+    """Mean edge length of every local (owned + ghost) cell [m]: the cell's size, unlike its
+    longest edge not doubled by a sliver's long edge."""
+    x, cells = msh.geometry.x, msh.geometry.dofmap.array.reshape(-1, msh.topology.dim + 1)
+    pairs = [(i, j) for i in range(cells.shape[1]) for j in range(i + 1, cells.shape[1])]
+    return sum(np.linalg.norm(x[cells[:, i]] - x[cells[:, j]], axis=1) for i, j in pairs) / len(pairs)
+
+
 def min_cell_size(msh: dmesh.Mesh) -> float:
     """Global smallest cell size h_min [m] (collective)."""
     h = cell_sizes(msh)

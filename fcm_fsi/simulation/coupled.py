@@ -43,10 +43,17 @@ from ..config.case import Case
 from ..coupling.added_mass import AddedMassStage
 from ..coupling.body_output import BodyOutput
 from ..coupling.cut_stage import CutStage
-from ..coupling.dem_side import DEMSubcycler, fluid_gyration_ratio, fluid_volume_ratio, shapes_of_blocks
+from ..coupling.dem_side import (
+    DEMSubcycler,
+    fluid_gyration_ratio,
+    fluid_thickness,
+    fluid_volume_ratio,
+    shapes_of_blocks,
+)
 from ..coupling.diagnostics import CoupledDiagnostics
 from ..coupling.exchange import ExchangeStage
 from ..coupling.implicit import ImplicitIteration, StepSnapshot, dem_arrays, load_dem_arrays
+from ..coupling.unresolved import UnresolvedBlocks
 from ..dem.model import build_system
 from ..fcm.levelset import FaceDistance, StructureLevelSet
 from ..fluid.cut_walls import CutDomain
@@ -102,10 +109,17 @@ class CoupledModel:
                                     comm.rank)
         mass, inertia = self.added.mass0, self.added.inertia0   # the blocks' own
         h_max = comm.allreduce(float(cell_sizes(self.mesh).max(initial=0.0)), op=MPI.MAX)
+        own_shapes = shapes_of_blocks(case.dem, st)
+        true_half = own_shapes.half if cp.min_thickness > 0 else None
+        self.unresolved = None                       # coupling.unresolved_cells: blocks loaded as point particles
+        if cp.unresolved_cells > 0:
+            self.unresolved = UnresolvedBlocks(case, self.mesh, st, own_shapes,
+                                               fluid_thickness(case.dem, st, cp.min_thickness, self.gdim),
+                                               self.fluid.probe_fields)
         self.cuts = CutStage(case, comm, self.dem, self.bonds, shapes, cut, self.fluid, self.h_min, h_max,
-                             gyration, mass, inertia, self.depth)
+                             gyration, mass, inertia, self.depth, true_half, self.unresolved)
         self.exchange = ExchangeStage(case, comm, self.dem, cut, self.ns, self.cuts.walls, self.cuts.hidden,
-                                      self.added, self.depth)
+                                      self.added, self.depth, self.unresolved)
         self.implicit = ImplicitIteration(cp, self.cuts.walls, gyration)
         self.report = CoupledDiagnostics(case, comm, self.fluid, self.cuts, self.exchange, self.dem, self.implicit,
                                          self.bonds, mass, inertia, rho, self.depth, self.h_min, h_max)
@@ -239,7 +253,8 @@ class CoupledModel:
         """Whether ``points`` (n, gdim) [m] lie inside a block now (its own shape, no gap fill)."""
         x = np.zeros((len(points), 3))
         x[:, : self.gdim] = points
-        shapes = StructureLevelSet(self.cuts.levelset.shapes, self.nb, self.cuts.band)
+        ls = self.cuts.levelset
+        shapes = StructureLevelSet(ls.shapes, self.nb, self.cuts.band, walls=ls.walls, true_half=ls.true_half)
         st = self.system.state
         return shapes.evaluate(x, st.pos, st.quat)[0] < 0
 
@@ -249,6 +264,8 @@ class CoupledModel:
     def state(self):
         fields, globals_ = self.fluid.state()
         globals_.update(dem_arrays(self.system, self.dem, self.added))
+        if self.unresolved is not None:
+            globals_["unresolved_blocks"] = self.unresolved.unseen.astype(np.int8)
         return fields, globals_
 
     def write_output(self, t: float) -> None:
@@ -260,4 +277,6 @@ class CoupledModel:
         load_dem_arrays(self.system, self.dem, self.added, checkpoint.globals)
         self.output.resume(checkpoint.time)                # continue the earlier run's files
         self.added.resume(checkpoint.time)
+        if self.unresolved is not None and "unresolved_blocks" in checkpoint.globals:
+            self.cuts.take_out(np.flatnonzero(checkpoint.globals["unresolved_blocks"]))
         self.cuts.rebuild()

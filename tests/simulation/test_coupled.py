@@ -562,3 +562,35 @@ def test_a_fixed_block_keeps_its_cut_and_a_moved_one_gets_a_new_one():
     model.system.state.pos[0, 1] += 1e-3
     model.cuts.rebuild()
     assert len(calls) == 1 and model.cuts.stats != stats
+
+
+def test_an_unresolved_block_rises_as_a_point_particle_with_buoyancy_and_drag(tmp_path):
+    """``coupling.unresolved_cells`` above the box's 4 cells: the coarse floating box, released
+    fully submerged, leaves the cut at once and rises as a point particle. Its load is the
+    buoyancy ρ_w V g at rest, and its velocity follows m dv/dt = (ρ_w − ρ_b) V g − ½ ρ_w C_d A v²,
+    v = v_t tanh(a₀ t / v_t), to the first-order lag of a load held over each fluid step
+    (Δt over the time scale v_t/a₀ = 0.1 s: 2 %). The fluid feels nothing (no cut cells) and
+    a restart keeps the block out of the cut."""
+    data = coarse_case(0.06)
+    data["dem"]["blocks"][0]["position"] = [1.0037, 0.12, 0.0]          # top 0.17 m, water 0.25 m deep
+    data["coupling"].update({"unresolved_cells": 5.0, "unresolved_drag": 1.05})
+    case = tmp_path / "case.yaml"
+    case.write_text(yaml.safe_dump(data))
+    run = run_cli([str(case), "--output", str(tmp_path / "full")])
+    assert run.returncode == 0, run.stderr[-2000:]
+    log = run.stdout + run.stderr
+    assert "block 0 (0.1 m thick in the fluid" in log and "point particle" in log
+    s = read(tmp_path / "full" / "series.csv")
+    rho_w, rho_b, volume, area, g = 998.2, 500.0, 0.2 * 0.1 * 0.1, 0.2 * 0.1, 9.81
+    assert s["cut_cells"].max() == 0 and s["unresolved_blocks"][1:].min() == 1
+    # row 0: t = 0; at the first step ρ(φ) at the centre, 0.13 m below the diffuse interface (its
+    # tanh tail: φ ≈ 1 − 5e-4), and the water's drag, at rest up to the air's start-up motion
+    assert s["force_y"][1] == pytest.approx(rho_w * volume * g, rel=2e-3)
+    a0 = (rho_w - rho_b) * volume * g / (rho_b * volume)
+    v_t = np.sqrt(2.0 * (rho_w - rho_b) * volume * g / (rho_w * 1.05 * area))
+    expected = v_t * np.tanh(a0 * s["t"] / v_t)
+    assert s["b0_vy"][-1] > 0.4
+    np.testing.assert_allclose(s["b0_vy"][5:], expected[5:], rtol=0.02)
+    run_half_and_resume(case, tmp_path / "half", 0.03)
+    r = read(tmp_path / "half" / "series.csv")
+    assert r["cut_cells"].max() == 0 and abs(r["b0_vy"][-1] - s["b0_vy"][-1]) < 1e-12
