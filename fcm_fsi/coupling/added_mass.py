@@ -44,6 +44,7 @@ from ..fluid.solvers import DIRECT_LU, make_ksp
 from ..fluid.solvers import solve as solve_ksp
 from ..fluid.tagged_form import TaggedForm
 from ..mesh.build import mesh_extent
+from .dem_side import block_volume
 
 #: solver of the pressure-impulse Laplacian (a symmetric positive definite P1 system)
 POISSON_2D = dict(DIRECT_LU)
@@ -207,9 +208,8 @@ class AddedMassStage:
         st = system.state
         self.nb = st.nb
         self.mass0, self.inertia0 = st.mass.copy(), st.inertia.copy()
-        dens = np.array([m.density for m in case.dem.materials])
         #: V_b, the block's volume as the fluid sees it (m_b/ρ_material × the min_thickness widening)
-        self.volume_b = st.mass / dens[st.sph_material[st.blk_sph_start[:-1]]] * volume_ratio
+        self.volume_b = block_volume(case.dem, st) * volume_ratio
         with np.errstate(invalid="ignore", divide="ignore"):   # fixed blocks: no added mass
             k2 = self.inertia0 / self.mass0[:, None] * gyration_ratio
         self.gyration_sq = np.where(np.isfinite(k2), k2, 0.0)

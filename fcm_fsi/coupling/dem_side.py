@@ -49,7 +49,7 @@ from ..fcm.levelset import BOX, MESH, SPHERE, Shapes
 from ..geometry import quat_to_matrix_np
 from ..geometry.surface_distance import DistanceGrid, distance_grid
 
-__all__ = ["DEMSubcycler", "Exchange", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio",
+__all__ = ["DEMSubcycler", "Exchange", "block_volume", "bonded_clusters", "cluster_rigid_motion", "fluid_gyration_ratio",
            "fluid_thickness", "fluid_volume_ratio", "rigid_body_velocity", "shapes_of_blocks", "state_digests", "substep_count"]
 
 REPLICATED = ("pos", "quat", "vel", "angmom", "ext_force", "ext_torque")   # compared across ranks
@@ -93,6 +93,13 @@ def shapes_of_blocks(cfg: DEMConfig, state: DEMState, min_thickness: float = 0.0
     if first != state.nb:
         raise ValueError(f"the DEM config describes {first} blocks but the state has {state.nb}")
     return Shapes.concat(parts)
+
+
+def block_volume(cfg: DEMConfig, state: DEMState) -> np.ndarray:
+    """Per block (nb,): its own volume [m³], mass / its material's density (the material of its
+    first sphere)."""
+    density = np.array([m.density for m in cfg.materials])
+    return state.mass / density[state.sph_material[state.blk_sph_start[:-1]]]
 
 
 def fluid_volume_ratio(cfg: DEMConfig, state: DEMState, min_thickness: float, gdim: int) -> np.ndarray:

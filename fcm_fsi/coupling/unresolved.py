@@ -36,6 +36,7 @@ from ..fluid.phase_field import property_map
 from ..fluid.probes import PointValues
 from ..io.logging import get_logger
 from ..mesh.build import cell_mean_edges
+from .dem_side import block_volume
 
 log = get_logger("coupled")
 
@@ -92,8 +93,7 @@ class UnresolvedBlocks:
         self.box_axes = np.tile(np.eye(3), (state.nb, 1, 1))
         self.half[shapes.body[single]] = shapes.half[single]
         self.box_axes[shapes.body[single]] = shapes.rot[single]
-        dens = np.array([m.density for m in case.dem.materials])
-        self.volume = state.mass / dens[state.sph_material[state.blk_sph_start[:-1]]]
+        self.volume = block_volume(case.dem, state)
         self.fields = fields
         self.unseen = np.zeros(state.nb, bool)
         self.points = PointValues(mesh, state.nb) if self.active else None

@@ -47,21 +47,23 @@ def cell_sizes(msh: dmesh.Mesh) -> np.ndarray:
     return longest_edges(msh.geometry.x, msh.geometry.dofmap.array.reshape(-1, msh.topology.dim + 1))
 
 
+def edge_lengths(x: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Lengths [m] (nc, nv(nv − 1)/2) of every simplex's edges: vertex coordinates x (n, 3),
+    cells (nc, nv) indices."""
+    nv = cells.shape[1]
+    return np.stack([np.linalg.norm(x[cells[:, i]] - x[cells[:, j]], axis=1)
+                     for i in range(nv) for j in range(i + 1, nv)], axis=1)
+
+
 def longest_edges(x: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Longest edge [m] of every simplex: vertex coordinates x (n, 3), cells (nc, nv) indices."""
-    h = np.zeros(cells.shape[0])
-    for i in range(cells.shape[1]):
-        for j in range(i + 1, cells.shape[1]):
-            h = np.maximum(h, np.linalg.norm(x[cells[:, i]] - x[cells[:, j]], axis=1))
-    return h
+    return edge_lengths(x, cells).max(axis=1, initial=0.0)
 
 
 def cell_mean_edges(msh: dmesh.Mesh) -> np.ndarray:
     """Mean edge length of every local (owned + ghost) cell [m]: the cell's size, unlike its
     longest edge not doubled by a sliver's long edge."""
-    x, cells = msh.geometry.x, msh.geometry.dofmap.array.reshape(-1, msh.topology.dim + 1)
-    pairs = [(i, j) for i in range(cells.shape[1]) for j in range(i + 1, cells.shape[1])]
-    return sum(np.linalg.norm(x[cells[:, i]] - x[cells[:, j]], axis=1) for i, j in pairs) / len(pairs)
+    return edge_lengths(msh.geometry.x, msh.geometry.dofmap.array.reshape(-1, msh.topology.dim + 1)).mean(axis=1)
 
 
 def min_cell_size(msh: dmesh.Mesh) -> float:

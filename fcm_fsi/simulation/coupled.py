@@ -109,7 +109,7 @@ class CoupledModel:
                                     comm.rank)
         mass, inertia = self.added.mass0, self.added.inertia0   # the blocks' own
         h_max = comm.allreduce(float(cell_sizes(self.mesh).max(initial=0.0)), op=MPI.MAX)
-        own_shapes = shapes_of_blocks(case.dem, st)
+        own_shapes = shapes_of_blocks(case.dem, st) if cp.min_thickness > 0 else shapes   # unwidened
         true_half = own_shapes.half if cp.min_thickness > 0 else None
         self.unresolved = None                       # coupling.unresolved_cells: blocks loaded as point particles
         if cp.unresolved_cells > 0:
