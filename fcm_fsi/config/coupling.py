@@ -122,10 +122,15 @@ class CouplingConfig:
                                       gt=0)
     iteration_relaxation: float = param(0.5, doc="relaxation factor of the first pass's update (Aitken: its first factor)",
                                         gt=0, le=1)
-    iteration_method: Literal["aitken", "iqn_ils"] = param(
+    iteration_method: Literal["aitken", "iqn_ils", "iqn_mvj"] = param(
         "aitken", doc="update of the guessed velocities between passes (coupling/fixed_point.py): aitken = relaxed by "
                       "Aitken's Δ² factor (one scalar); iqn_ils = interface quasi-Newton with least-squares inverse "
-                      "Jacobian from this step's passes (Degroote et al. 2009): fewer passes when few blocks move")
+                      "Jacobian from this step's passes (Degroote et al. 2009): fewer passes when few blocks move; "
+                      "iqn_mvj = the same Jacobian carried into the next steps (multi-vector, Bogaers et al. 2014): "
+                      "the first update of a step is a quasi-Newton one too")
+    iteration_reuse: int = param(
+        20, doc="iqn_mvj: steps whose passes the carried inverse Jacobian holds before it starts again from the "
+                "identity", ge=1, le=1000)
     force_mode: Literal["hold", "linear"] = param(
         "hold", doc="fluid load over the DEM sub-steps: hold = constant; linear = ramp from the previous exchange")
     added_mass: float = param(0.0, doc="C_a of the added-mass stabilisation: each block's DEM inertia is raised by "

@@ -46,9 +46,11 @@ from ..fluid.tagged_form import TaggedForm
 from ..mesh.build import mesh_extent
 from .dem_side import block_volume
 
-#: solver of the pressure-impulse Laplacian (a symmetric positive definite P1 system)
+#: solver of the pressure-impulse Laplacian (a symmetric positive definite P1 system); M = Bᵀ A⁻¹ B is
+#: a quadratic form, so its error is of the order of the squared solve error: on the tsunami's debris the
+#: largest eigenvalues at rtol 1e-6 agree with those at 1e-8 to 2e-8, in 5 BoomerAMG iterations instead of 7
 POISSON_2D = dict(DIRECT_LU)
-POISSON_3D = {"ksp_type": "cg", "ksp_rtol": 1e-8, "ksp_max_it": 2000, "pc_type": "hypre",
+POISSON_3D = {"ksp_type": "cg", "ksp_rtol": 1e-6, "ksp_max_it": 2000, "pc_type": "hypre",
               "pc_hypre_type": "boomeramg"}
 
 

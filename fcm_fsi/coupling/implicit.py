@@ -8,7 +8,8 @@ implicit coupling.
 :class:`ImplicitIteration` (``coupling.iterations`` > 1): a fixed-point iteration on the
 block velocities at tⁿ⁺¹ (the wall velocity ū the fluid gets ⇄ the result of the DEM
 sub-steps), updated between passes as ``coupling.iteration_method`` says (fixed_point.py),
-every pass from the same start state. The unknown is, per block, the V and Ω × radius of
+every pass from the same start state (``iqn_mvj`` also carries its inverse Jacobian from step to
+step: :meth:`ImplicitIteration.arrays`). The unknown is, per block, the V and Ω × radius of
 gyration of the rigid motion its wall nodes get (wall_motion.WallMotion.motion: with
 ``wall_velocity: mean`` the sub-steps' mean, with ``wall_motion: bonded_cluster`` its
 cluster's motion), not the end-of-step v, ω: the fluid never sees those in these modes, so
@@ -49,19 +50,22 @@ def load_dem_arrays(system, dem, added, g: dict[str, np.ndarray]) -> None:
 class StepSnapshot:
     """The start state of a coupled step (module docstring), taken at construction.
     ``fluid`` has ``snapshot()``/``restore(s)``; ``dem`` the DEMSubcycler; ``added`` the
-    AddedMassStage; ``exchange`` the ExchangeStage."""
+    AddedMassStage; ``exchange`` the ExchangeStage; ``implicit`` the ImplicitIteration or None."""
 
-    def __init__(self, fluid, dem, added, exchange) -> None:
-        self.fluid, self.dem, self.added, self.exchange = fluid, dem, added, exchange
+    def __init__(self, fluid, dem, added, exchange, implicit=None) -> None:
+        self.fluid, self.dem, self.added, self.exchange, self.implicit = fluid, dem, added, exchange, implicit
         self._fluid = fluid.snapshot()
         self._dem = dem_arrays(dem.system, dem, added)
         self._exchange = exchange.snapshot()
+        self._implicit = implicit.arrays() if implicit is not None else None
 
     def restore(self) -> None:
         """Put the start state back (the snapshot stays valid for another restore)."""
         self.fluid.restore(self._fluid)
         load_dem_arrays(self.dem.system, self.dem, self.added, self._dem)
         self.exchange.restore(self._exchange)
+        if self.implicit is not None:
+            self.implicit.load_arrays(self._implicit)
 
 
 class ImplicitIteration:
@@ -70,6 +74,8 @@ class ImplicitIteration:
 
     def __init__(self, coupling, walls, gyration: np.ndarray) -> None:
         self.coupling, self.walls, self.gyration = coupling, walls, gyration
+        self.fixed_point = accelerator(coupling.iteration_method, coupling.iteration_relaxation,
+                                       coupling.iteration_reuse)
         self.iterations_done, self.residual = 1, 0.0
         self.unconverged = 0          # steps that ended without meeting iteration_tol
         self.history: list[float] = []    # the residual after each pass of the last step
@@ -89,7 +95,8 @@ class ImplicitIteration:
         Returns the last pass's DEM load."""
         cp = self.coupling
         guess = self.unknown()
-        fixed_point = accelerator(cp.iteration_method, cp.iteration_relaxation)
+        fixed_point = self.fixed_point
+        fixed_point.start_step()
         self.history = []
         for k in range(cp.iterations):
             later = k > 0 and retake
@@ -109,7 +116,8 @@ class ImplicitIteration:
             self.history.append(self.residual)
             if self.residual <= cp.iteration_tol:
                 break
-            guess = fixed_point.next_guess(guess, result)
+            if k + 1 < cp.iterations:
+                guess = fixed_point.next_guess(guess, result)
         else:
             # the first time as a warning, then at debug level (series.csv: coupling_residual of every step)
             report = log.debug if self.unconverged else log.warning
@@ -118,5 +126,15 @@ class ImplicitIteration:
                    "coupling.iteration_tol %.2e); the step is taken with the last pass (later ones: series.csv, "
                    "coupling_residual). Residuals far above the tolerance in a row precede a blow-up: raise "
                    "coupling.iterations or lower run.cfl", t, cp.iterations, self.residual, cp.iteration_tol)
+        fixed_point.end_step(guess, result)
         log.debug("t = %.6g s: coupling residuals %s", t, " ".join(f"{r:.2e}" for r in self.history))
         return load
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """What the iteration carries from step to step (``iqn_mvj``'s inverse Jacobian; nothing
+        for the others): checkpoint globals and the step snapshot."""
+        return self.fixed_point.arrays()
+
+    def load_arrays(self, g: dict[str, np.ndarray]) -> None:
+        """Inverse of :meth:`arrays`."""
+        self.fixed_point.load_arrays(g)

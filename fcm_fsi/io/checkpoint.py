@@ -110,7 +110,8 @@ def case_fingerprint(case, legacy: bool = False, without: tuple[tuple[str, str],
         (data.get("fluid") or {}).pop(key, None)
     data["run"].pop("cfl_gas", None)   # the gas's Courant bound: a restart may loosen it
     # how the coupling's fixed point is solved: changes the solution at iteration_tol
-    (data.get("coupling") or {}).pop("iteration_method", None)
+    for key in ("iteration_method", "iteration_reuse"):
+        (data.get("coupling") or {}).pop(key, None)
     for section, key in without:
         for holder in _option_holders(data, section):
             holder.pop(key, None)

@@ -151,7 +151,7 @@ class CoupledModel:
     # ----------------------------------------------------------------- the step
     def snapshot(self) -> StepSnapshot:
         """The step's start state, to take it again (the loop's retaken steps)."""
-        return StepSnapshot(self.fluid, self.dem, self.added, self.exchange)
+        return StepSnapshot(self.fluid, self.dem, self.added, self.exchange, self.implicit)
 
     def restore(self, start: StepSnapshot) -> None:
         start.restore()
@@ -264,6 +264,7 @@ class CoupledModel:
     def state(self):
         fields, globals_ = self.fluid.state()
         globals_.update(dem_arrays(self.system, self.dem, self.added))
+        globals_.update(self.implicit.arrays())
         if self.unresolved is not None:
             globals_["unresolved_blocks"] = self.unresolved.unseen.astype(np.int8)
         return fields, globals_
@@ -275,6 +276,7 @@ class CoupledModel:
     def load_state(self, checkpoint) -> None:
         self.fluid.load_state(checkpoint)
         load_dem_arrays(self.system, self.dem, self.added, checkpoint.globals)
+        self.implicit.load_arrays(checkpoint.globals)
         self.output.resume(checkpoint.time)                # continue the earlier run's files
         self.added.resume(checkpoint.time)
         if self.unresolved is not None and "unresolved_blocks" in checkpoint.globals:

@@ -456,7 +456,7 @@ def falling_block_case() -> dict:
     return data
 
 
-@pytest.mark.parametrize("method", ["aitken", "iqn_ils"])
+@pytest.mark.parametrize("method", ["aitken", "iqn_ils", "iqn_mvj"])
 def test_retaken_passes_give_the_step_computed_from_scratch(method):
     """The later passes of an implicit step keep the first pass's cut and the flow's added mass
     and start Newton from the last pass's flow on the kept factorisation and Jacobian
@@ -519,12 +519,14 @@ def test_the_coupled_dem_keeps_no_ledger_and_steps_as_with_one():
     np.testing.assert_array_equal(fused.ns.U.x.array, staged.ns.U.x.array)
 
 
-def test_implicit_quasi_newton_run_restarts_to_the_uninterrupted_run(tmp_path):
-    """Issue #9 item 5 for the tsunami's coupling (implicit passes, ``iqn_ils``, retaken passes):
+@pytest.mark.parametrize("method", ["iqn_ils", "iqn_mvj"])
+def test_implicit_quasi_newton_run_restarts_to_the_uninterrupted_run(tmp_path, method):
+    """Issue #9 item 5 for the tsunami's coupling (implicit passes, quasi-Newton, retaken passes):
     what a step keeps between its passes (cut, m̃, factorisation, the quasi-Newton differences)
-    lives within the step, so a restart from a mid-run checkpoint reproduces the run."""
+    lives within the step, and what ``iqn_mvj`` carries to the next steps (its inverse Jacobian)
+    is in the checkpoint, so a restart from a mid-run checkpoint reproduces the run."""
     data = falling_block_case()
-    data["coupling"]["iteration_method"] = "iqn_ils"
+    data["coupling"]["iteration_method"] = method
     data["run"].update({"t_end": 0.024, "checkpoint_every": 6})
     case = tmp_path / "case.yaml"
     case.write_text(yaml.safe_dump(data))
