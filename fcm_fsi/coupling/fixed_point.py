@@ -27,7 +27,21 @@ from __future__ import annotations
 import numpy as np
 
 
-class Aitken:
+class WithinStep:
+    """An accelerator whose state lives within a step: nothing to end, carry or restore."""
+
+    def end_step(self, x: np.ndarray, x_tilde: np.ndarray) -> None:
+        pass
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Nothing carries over from one step to the next."""
+        return {}
+
+    def load_arrays(self, g: dict[str, np.ndarray]) -> None:
+        pass
+
+
+class Aitken(WithinStep):
     """x ← x + ω r, ω from Aitken's Δ² rule, first ω = ``omega``, clipped to [0.05, 1]."""
 
     def __init__(self, omega: float) -> None:
@@ -48,18 +62,8 @@ class Aitken:
         """A new step: the rule starts again from ``omega``."""
         self.omega, self._r_old = self.omega0, None
 
-    def end_step(self, x: np.ndarray, x_tilde: np.ndarray) -> None:
-        pass
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Nothing carries over from one step to the next."""
-        return {}
-
-    def load_arrays(self, g: dict[str, np.ndarray]) -> None:
-        pass
-
-
-class InterfaceQuasiNewton:
+class InterfaceQuasiNewton(WithinStep):
     """IQN-ILS: the first pass relaxed by ``omega``, later ones x ← x̃ + W c with
     c = argmin ‖V c + r‖ over this step's differences (columns whose singular values fall
     below ``rcond`` × the largest are dropped: nearly dependent differences)."""
@@ -75,16 +79,6 @@ class InterfaceQuasiNewton:
         self._xt_prev: np.ndarray | None = None
         self._dr: list[np.ndarray] = []
         self._dxt: list[np.ndarray] = []
-
-    def end_step(self, x: np.ndarray, x_tilde: np.ndarray) -> None:
-        pass
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Nothing carries over from one step to the next."""
-        return {}
-
-    def load_arrays(self, g: dict[str, np.ndarray]) -> None:
-        pass
 
     def next_guess(self, x: np.ndarray, x_tilde: np.ndarray) -> np.ndarray:
         r = x_tilde - x
