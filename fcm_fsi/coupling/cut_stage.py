@@ -89,13 +89,18 @@ class CutStage:
         ``drain_pockets`` (the drain also resets the restored flow's pressure). The same holds
         whenever every pose equals, to the bit, the last full rebuild's (fixed or resting
         blocks): the level set, the cut and the hidden surfaces are functions of the poses.
-        Returns the cut's statistics."""
+        The phase field inside the bodies moves with the blocks' current v, ω (their motion at the
+        start of the step, explicit as their poses are), whatever ``velocities`` says: a later
+        pass keeps its φ and the flow's matrix (``TwoPhaseModel.advance``). Returns the cut's
+        statistics."""
         st = self.dem.system.state
+        later = same_poses
         same_poses = same_poses or (self._poses is not None and np.array_equal(st.pos, self._poses[0])
                                     and np.array_equal(st.quat, self._poses[1]))
         if same_poses and self._pass_cut is not None and not self.case.coupling.drain_pockets:
             owner, self.stats = self._pass_cut
-            self.cut.set_wall_velocity(self.walls.at_nodes(owner, velocities)[0])
+            ubar = self.walls.at_nodes(owner, velocities)[0]
+            self.cut.set_wall_velocity(ubar, self._inside_velocity(owner, ubar, velocities, later))
             return self.stats
         self._poses = (st.pos.copy(), st.quat.copy())
         if self.unresolved is not None:
@@ -105,13 +110,22 @@ class CutStage:
             self.pockets.apply(level, owner, self.levelset, self.walls.fill_free_to_part(owner), st.pos, st.quat,
                                self.node_density)
         ubar, share = self.walls.at_nodes(owner, velocities)
-        self.stats = self.cut.update(level, owner, ubar, share)
+        self.stats = self.cut.update(level, owner, ubar, share, self._inside_velocity(owner, ubar, velocities, later))
         self._pass_cut = (owner, self.stats)
         if self.hidden is not None:
             self.hidden.rebuild(level, st.pos, st.quat)
         if hasattr(self.fluid, "follow_cut"):
             self.fluid.follow_cut(self.cut, None if self.pockets is None else self.pockets.cells)
         return self.stats
+
+    def _inside_velocity(self, owner: np.ndarray, ubar: np.ndarray, velocities: np.ndarray | None,
+                         later: bool) -> np.ndarray:
+        """The velocity (n, gdim) [m/s] the phase field moves with inside the bodies: the wall
+        velocity of the blocks' current v, ω (``ubar`` when no ``velocities`` were given), kept
+        from the step's first pass in a ``later`` one."""
+        if later:
+            return self.cut.node_inside_velocity
+        return ubar if velocities is None else self.walls.at_nodes(owner)[0]
 
     def take_out(self, blocks: np.ndarray) -> None:
         """Leave ``blocks`` out of the level sets from now on (unresolved, point particles)."""

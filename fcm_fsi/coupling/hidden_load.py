@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 from dolfinx import fem, la
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..config.loader import ConfigError
@@ -171,7 +172,7 @@ class HiddenLoad:
         g[: self.gdim] = self.gravity
         moved = P + rho * ((x - y) @ g)                           # hydrostatically back to the node
         bad = ~np.isfinite(moved)
-        if bad.any():                                             # the offset point left the mesh
+        if self.cut.comm.allreduce(bool(bad.any()), op=MPI.LOR):    # an offset point left the mesh (collective)
             moved[bad] = self.column.values(x[bad], p, density, self.cut.level_set)
         out.x.array[self._column_of_node[self._nodes]] = np.nan_to_num(moved)
         return out

@@ -45,6 +45,8 @@ def load_dem_arrays(system, dem, added, g: dict[str, np.ndarray]) -> None:
     if "coupling__mean_velocity" in g:
         m, nb = g["coupling__mean_velocity"], system.state.nb
         dem.mean_velocity, dem.mean_omega = m[:nb].copy(), m[nb:].copy()
+    else:                                  # taken before the first step: no sub-steps' mean yet
+        dem.mean_velocity = dem.mean_omega = None
 
 
 class StepSnapshot:

@@ -64,13 +64,9 @@ def column_integral(rho: np.ndarray, found: np.ndarray, g: float, ds: float) -> 
     return np.concatenate([np.zeros((ncol, 1)), np.cumsum(seg, axis=1)], axis=1)
 
 
-def fill_across(cols: np.ndarray, values: np.ndarray, known: np.ndarray,
-                max_sweeps: int = 1000) -> tuple[np.ndarray, np.ndarray]:
-    """``values`` (ncol, nlev) at the columns of grid indices ``cols`` (ncol, k), the entries not
-    ``known`` replaced, level by level, by the mean of the known values of the neighbouring
-    columns (±1 along each grid axis), sweep after sweep until none is left that a known one
-    reaches. Returns the values and which are now known."""
-    values, known = values.copy(), known.copy()
+def column_neighbours(cols: np.ndarray) -> list[np.ndarray]:
+    """For each grid axis and direction (−1, +1), the row in ``cols`` (ncol, k) of each column's
+    neighbour, −1 where it is not among them."""
     k = cols.shape[1]
     lookup = {tuple(c): i for i, c in enumerate(cols.tolist())}
     neighbours = []
@@ -79,6 +75,19 @@ def fill_across(cols: np.ndarray, values: np.ndarray, known: np.ndarray,
             shifted = cols.copy()
             shifted[:, axis] += step
             neighbours.append(np.array([lookup.get(tuple(c), -1) for c in shifted.tolist()], np.int64))
+    return neighbours
+
+
+def fill_across(cols: np.ndarray, values: np.ndarray, known: np.ndarray,
+                max_sweeps: int = 1000, neighbours: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``values`` (ncol, nlev) at the columns of grid indices ``cols`` (ncol, k), the entries not
+    ``known`` replaced, level by level, by the mean of the known values of the neighbouring
+    columns (±1 along each grid axis), sweep after sweep until none is left that a known one
+    reaches. Returns the values and which are now known. ``neighbours``: the columns'
+    :func:`column_neighbours`, if known."""
+    values, known = values.copy(), known.copy()
+    if neighbours is None:
+        neighbours = column_neighbours(cols)
     for _ in range(max_sweeps):
         todo = ~known
         if not todo.any():
@@ -95,6 +104,19 @@ def fill_across(cols: np.ndarray, values: np.ndarray, known: np.ndarray,
         values[new] = total[new] / count[new]
         known = known | new
     return values, known
+
+
+class _Columns:
+    """What the points of a :meth:`ColumnPressure.values` call fix: each point's lower column
+    corner ``cell``, fractions ``frac`` and ``level``; the columns ``cols`` around the points of all
+    ranks, their levels ``nlev`` and level points (``pts``, with the owned cells holding them:
+    ``point``, ``cells``); the columns' :func:`column_neighbours`; and the interpolation stencil
+    of each point (per corner of its column cell: the column's row and the weight across)."""
+
+    def __init__(self, key: bytes, cell, frac, level, cols, nlev, located, neighbours, corners) -> None:
+        self.key, self.cell, self.frac, self.level, self.cols, self.nlev = key, cell, frac, level, cols, nlev
+        self.pts, self.point, self.cells = located
+        self.neighbours, self.corners = neighbours, corners
 
 
 class ColumnPressure:
@@ -121,6 +143,7 @@ class ColumnPressure:
         self.n_owned = mesh.topology.index_map(self.dim).size_local
         self.p1 = P1Values.of(mesh)
         self._located = None                                      # (key, point, cell) of the last column set
+        self._geometry = []                                       # the _Columns of the last calls' points
 
     def _columns(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Grid indices (n, k) of each point's lower column corner, its fractions (n, k) and
@@ -168,6 +191,31 @@ class ColumnPressure:
         self._located = (key, pts, point, cells)
         return pts, point, cells
 
+    #: how many sets of points keep their columns (:meth:`_columns_of`): a hidden surface's probe
+    #: points and the few nodes whose probe left the mesh
+    KEPT_POINT_SETS = 2
+
+    def _columns_of(self, points: np.ndarray) -> _Columns:
+        """The columns and stencils of ``points`` (n, 3) (this rank's), kept for the last
+        :data:`KEPT_POINT_SETS` sets of points: a coupled step asks for the same points once per
+        implicit pass. Collective (the columns are every rank's)."""
+        key = points.tobytes()
+        at = next((i for i, g in enumerate(self._geometry) if g.key == key), -1)
+        both = np.array([at, -at])
+        self.comm.Allreduce(MPI.IN_PLACE, both, op=MPI.MAX)
+        at = at if both[0] == -both[1] else -1                   # the same kept set on every rank
+        if at >= 0:
+            return self._geometry[at]
+        cell, frac, level_of_point = self._columns(points)
+        cols, deepest = self._needed(cell, level_of_point)
+        nlev = max(int(deepest.max()) + 1, 2) if len(cols) else 0
+        located = self._locate(cols, nlev) if len(cols) else (None, None, None)
+        neighbours = column_neighbours(cols) if len(cols) else []
+        corners = self._stencil(cols, cell, frac) if len(cols) else []
+        g = _Columns(key, cell, frac, level_of_point, cols, nlev, located, neighbours, corners)
+        self._geometry = ([g] + self._geometry)[: self.KEPT_POINT_SETS]
+        return g
+
     def values(self, points: np.ndarray, pressure, density, level=None, with_density: bool = False):
         """P [Pa] at ``points`` (n, 3) (each rank its own; collective): ``pressure`` the
         fluid's P1 pressure, ``density`` a Function [kg/m³] or a number; ``level`` a level set
@@ -176,13 +224,12 @@ class ColumnPressure:
         there (next to a wall the columns through the wall carry the wall's contents, not the
         water's weight). ``with_density``: also the density [kg/m³] at the points, interpolated
         alike."""
-        points = np.asarray(points, float).reshape(-1, 3)
-        cell, frac, level_of_point = self._columns(points)
-        cols, deepest = self._needed(cell, level_of_point)
+        points = np.ascontiguousarray(np.asarray(points, float).reshape(-1, 3))
+        g = self._columns_of(points)
+        cols, nlev = g.cols, g.nlev
         if len(cols) == 0:
             return (np.zeros(len(points)), np.zeros(len(points))) if with_density else np.zeros(len(points))
-        nlev = max(int(deepest.max()) + 1, 2)
-        pts, point, cells = self._locate(cols, nlev)
+        pts, point, cells = g.pts, g.point, g.cells
         functions = ((pressure,) if np.isscalar(density) else (pressure, density)) + (() if level is None else (level,))
         local = np.zeros((len(functions) + 1, len(pts)))
         local[:-1, point] = self.p1.values(functions, pts[point], cells)
@@ -205,29 +252,38 @@ class ColumnPressure:
             # below a solid a column's weight counts the solid's contents: take those levels
             # from the columns beside it that reach them through fluid only
             clean = np.cumprod(~found | wet, axis=1).astype(bool) & found
-            column, clean = fill_across(cols, column, clean)
+            column, clean = fill_across(cols, column, clean, neighbours=g.neighbours)
             rho = np.where(clean | ~found, rho, np.nan)
             wet = wet & clean
-        value = self._interpolate(cols, valid, wet, column, cell, frac, level_of_point)
+        value = self._interpolate(g, valid, wet, column)
         if not with_density:
             return value
-        return value, self._interpolate(cols, valid, wet, rho, cell, frac, level_of_point)
+        return value, self._interpolate(g, valid, wet, rho)
 
-    def _interpolate(self, cols, valid, wet, column, cell, frac, level) -> np.ndarray:
-        """Linear in the level, (bi)linear across the columns around each point; columns
-        outside the mesh left out, and columns in a solid at the point's level where another
-        is in the fluid (``wet`` per column and level)."""
+    @staticmethod
+    def _stencil(cols: np.ndarray, cell: np.ndarray, frac: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per corner of each point's column cell: the row in ``cols`` of that column and its
+        (bi)linear weight across."""
         k = cell.shape[1]
-        n = len(cell)
         lookup = {tuple(c): i for i, c in enumerate(cols.tolist())}
-        lev0 = np.minimum(np.floor(level).astype(np.int64), column.shape[1] - 2)
-        t = np.clip(level - lev0, 0.0, 1.0)
         corners = np.array(np.meshgrid(*[[0, 1]] * k, indexing="ij")).reshape(k, -1).T
-        nearest = np.where(t < 0.5, lev0, lev0 + 1)
-        stencil = []
+        out = []
         for corner in corners:
             idx = np.array([lookup[tuple(c)] for c in (cell + corner).tolist()], np.int64)
             w = np.prod(np.where(corner[None, :] == 1, frac, 1.0 - frac), axis=1)
+            out.append((idx, w))
+        return out
+
+    def _interpolate(self, g: _Columns, valid, wet, column) -> np.ndarray:
+        """Linear in the level, (bi)linear across the columns around each point (``g``); columns
+        outside the mesh left out, and columns in a solid at the point's level where another
+        is in the fluid (``wet`` per column and level)."""
+        n, level = len(g.cell), g.level
+        lev0 = np.minimum(np.floor(level).astype(np.int64), column.shape[1] - 2)
+        t = np.clip(level - lev0, 0.0, 1.0)
+        nearest = np.where(t < 0.5, lev0, lev0 + 1)
+        stencil = []
+        for idx, w in g.corners:
             v = (1 - t) * column[idx, lev0] + t * column[idx, lev0 + 1]
             ok = valid[idx] & np.isfinite(v)
             stencil.append((w, v, ok, ok & wet[idx, nearest]))

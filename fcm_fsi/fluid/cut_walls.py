@@ -75,28 +75,35 @@ class CutDomain(CutGeometry):
         self.h = cell_size(mesh)
         self._force_forms = None
         # the bodies at the mesh vertices as the last update left them: fluid side (level set > 0)
-        # and the wall velocity ū [m/s] (n, gdim); read by the flow inside the bodies (rigid_inside)
+        # the wall velocity ū and the velocity the phase field moves with inside them (rigid_inside)
+        # [m/s] (n, gdim)
         self.node_fluid = np.ones(self.nodes.shape[0], bool)
         self.node_wall_velocity = np.zeros((self.nodes.shape[0], self.gdim))
+        self.node_inside_velocity = self.node_wall_velocity
         self._node_maps = {}            # id(function space) → (space, its node at each vertex)
         self._density_forms = None      # fluid_part_density: (rho, its forms)
         self._inside_form = None        # liquid_inside: (phi, its form)
 
     def update(self, level: np.ndarray, owner: np.ndarray, wall_velocity: np.ndarray,
-               share: tuple[np.ndarray, np.ndarray] | None = None) -> CutStatistics:
+               share: tuple[np.ndarray, np.ndarray] | None = None,
+               inside_velocity: np.ndarray | None = None) -> CutStatistics:
         """New cut (:meth:`CutGeometry.update`: level set, owning body and ``share`` at each
-        node) and the wall velocity ū at each node (n, gdim). Returns the cut's statistics."""
+        node) and the wall velocity ū at each node (n, gdim), ``inside_velocity`` as in
+        :meth:`set_wall_velocity`. Returns the cut's statistics."""
         stats = super().update(level, owner, share)
         self.node_fluid = level > 0
-        self.set_wall_velocity(wall_velocity)
+        self.set_wall_velocity(wall_velocity, inside_velocity)
         return stats
 
-    def set_wall_velocity(self, wall_velocity: np.ndarray) -> None:
-        """The wall velocity ū (n, gdim) at each node of :attr:`nodes`, the cut unchanged."""
+    def set_wall_velocity(self, wall_velocity: np.ndarray, inside_velocity: np.ndarray | None = None) -> None:
+        """The wall velocity ū (n, gdim) at each node of :attr:`nodes`, the cut unchanged; and
+        the velocity the phase field moves with inside the bodies (:meth:`rigid_inside`):
+        ``inside_velocity`` (n, gdim), or ū itself when None."""
         bs = self.V1.dofmap.index_map_bs
         for d in range(self.gdim):
             self.wall_velocity.x.array[bs * self.wall_dofs + d] = wall_velocity[:, d]
         self.node_wall_velocity = wall_velocity
+        self.node_inside_velocity = wall_velocity if inside_velocity is None else inside_velocity
 
     # ------------------------------------------------ the bodies as the phase field sees them
     def _vertex_nodes(self, V: fem.FunctionSpace) -> np.ndarray:
@@ -117,11 +124,12 @@ class CutDomain(CutGeometry):
 
     def rigid_inside(self, u_values: np.ndarray, V: fem.FunctionSpace) -> None:
         """The phase field inside the bodies moves with them: set ``u_values`` (the array of a
-        P1 vector function on ``V``) to ū at the nodes inside (level set ≤ 0), in place."""
+        P1 vector function on ``V``) to the bodies' velocity (:meth:`set_wall_velocity`) at the
+        nodes inside (level set ≤ 0), in place."""
         nodes = self._vertex_nodes(V)
         u = u_values.reshape(-1, self.gdim)
         rigid = np.zeros_like(u)
-        rigid[nodes] = self.node_wall_velocity
+        rigid[nodes] = self.node_inside_velocity
         inside = ~self.fluid_nodes(V)
         u[inside] = rigid[inside]
 

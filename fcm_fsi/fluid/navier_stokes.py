@@ -216,6 +216,7 @@ class NavierStokes:
         self._correction = None        # (rhs, solution) work vectors of a retaken step's correction solve
         self._leftover = None          # (step, Δt, b − A dU) the last linearised solve left
         self.retaken_steps = retaken_steps
+        self._operator_of = None       # (step, Δt) whose coefficients the assembled A holds (linearised step)
 
     def field_index_sets(self) -> dict[str, PETSc.IS]:
         """Owned global rows of velocity ("u") and pressure ("p") in the monolithic system, for
@@ -322,6 +323,7 @@ class NavierStokes:
         constructor's (replacing any set before; ``()`` removes them): e.g. the pressure held in
         sealed pockets of a coupled run."""
         self.bcs = list(self._fixed_bcs) + list(bcs)
+        self._operator_of = None       # the assembled matrix has the old conditions' rows
 
     def set_velocity(self, fn: Callable[[np.ndarray], np.ndarray]) -> None:
         """Set the initial velocity u(x) (both U and U_n)."""
@@ -392,15 +394,21 @@ class NavierStokes:
         or ≤ atol; a guess that already meets it is accepted without a solve."""
         self._guess = guess
 
-    def step(self) -> StepInfo:
+    def step(self, same_operator: bool = False) -> StepInfo:
         """Advance one time step Δt (collective).
 
         The first ``config.startup_steps`` steps are each made of two backward-Euler half
         steps (Rannacher start-up): they damp the incompatible part of the initial data,
         which Crank–Nicolson alone never damps, without losing second order.
+
+        ``same_operator``: the step is taken again (from the same start, :meth:`warm_start`) with
+        every coefficient of the Jacobian as in its last solve — ρ, μ, the cut and the advecting
+        velocity, only data of the right-hand side such as the wall velocity changed (an implicit
+        coupling's later pass): the linearised step then keeps the assembled matrix, which it would
+        assemble again to the bit. Ignored by the Newton step and during the start-up.
         """
         if self.step_count >= self.config.startup_steps or self.config.theta == 1.0:
-            return self._advance()
+            return self._advance(same_operator)
         self._guess = None                          # a guess for the whole step fits neither half
         dt, theta = float(self.dt.value), float(self.theta.value)
         self.dt.value, self.theta.value = 0.5 * dt, 1.0
@@ -419,8 +427,9 @@ class NavierStokes:
         self.history[-2:] = [second]
         return second
 
-    def _advance(self) -> StepInfo:
-        """uⁿ ← u, t ← t + Δt, nonlinear solve to rtol/atol (collective)."""
+    def _advance(self, same_operator: bool = False) -> StepInfo:
+        """uⁿ ← u, t ← t + Δt, nonlinear solve to rtol/atol (collective); ``same_operator`` as
+        in :meth:`step`."""
         self.u_nm1.x.array[:] = self.U_n.x.array[self.V_map]
         self.U_n.x.array[:] = self.U.x.array
         self.update_strain()
@@ -434,7 +443,7 @@ class NavierStokes:
         warm = guess is not None
         if cfg.nonlinear == "linearised":   # a linear system: a guess changes nothing but the kept preconditioner
             return self._linear_solve(info, warm and self.reuse_preconditioner
-                                      and self._preconditioner_built == self.step_count)
+                                      and self._preconditioner_built == self.step_count, same_operator)
         if warm:
             t0 = time.perf_counter()
             self.update_tau()
@@ -472,10 +481,11 @@ class NavierStokes:
                                   f"no convergence in {cfg.max_iterations} {cfg.nonlinear} iterations "
                                   f"(rtol {cfg.rtol:g}, atol {cfg.atol:g})")
 
-    def _linear_solve(self, info: StepInfo, keep: bool) -> StepInfo:
+    def _linear_solve(self, info: StepInfo, keep: bool, same_operator: bool = False) -> StepInfo:
         """The linearised step (``nonlinear: linearised``): the Oseen system with the extrapolated
         advecting velocity and its τ is linear in (u, p), so one Newton update from uⁿ solves it
-        exactly; no second residual is assembled."""
+        exactly; no second residual is assembled. ``same_operator`` (:meth:`step`): the matrix
+        assembled for this step and Δt is kept."""
         t0 = time.perf_counter()
         self.update_tau()
         r = self._assemble_residual()
@@ -488,7 +498,9 @@ class NavierStokes:
             start = None if self.increments is None else self.increments.guess(self.step_count, dt)
             # taken before with this Δt (an implicit coupling's later pass): its last solve's leftover is kept
             retaken = self._leftover is not None and self._leftover[:2] == (self.step_count, dt)
-            self._update(info, assemble=True, reuse=keep, start=start, from_start=retaken)
+            kept = same_operator and self._operator_of == (self.step_count, dt)
+            self._update(info, assemble=not kept, reuse=keep, start=start, from_start=retaken)
+            self._operator_of = (self.step_count, dt)
             if self.increments is not None:
                 self.increments.record(self.step_count, dt, self.dU.x.array)
                 if self.retaken_steps:

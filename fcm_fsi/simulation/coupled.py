@@ -186,7 +186,7 @@ class CoupledModel:
     def _fluid_then_dem(self, t: float, dt: float, timer: StageTimer, retake: bool = False) -> np.ndarray:
         """Fluid step on the current cut, the exchange and the DEM sub-steps; returns the force
         the DEM got. ``retake``: a later pass of the step (same poses and bonds)."""
-        self.fluid.advance(t, dt, timer)
+        self.fluid.advance(t, dt, timer, retake=retake)
         with timer("exchange"):
             self.exchange.collect(self.ns.t, self.fluid.p_out, self.cuts.node_density, same_poses=retake)
         with timer("dem sub-steps"):

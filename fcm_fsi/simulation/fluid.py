@@ -95,11 +95,14 @@ class FluidModel:
         self.last_dt = case.run.dt
         self.iterations = 0
 
-    def advance(self, t: float, dt: float, timer: StageTimer) -> None:
+    def advance(self, t: float, dt: float, timer: StageTimer, retake: bool = False) -> None:
+        """One step of the flow. ``retake``: the step is taken again from the same start on the
+        same cut (an implicit coupling's later pass, whose wall velocity alone differs): the
+        flow's matrix is kept (``NavierStokes.step``)."""
         with timer("navier-stokes"):
             self.ns.dt.value = dt
             try:
-                self.iterations = self.ns.step().iterations
+                self.iterations = self.ns.step(same_operator=retake).iterations
             except NonlinearSolveError as err:
                 raise SimulationDiverged(str(err)) from err
         self.u_out.x.array[:] = self.ns.U.x.array[self.ns.V_map]

@@ -58,6 +58,19 @@ from .phase_field import phase_field_health
 GAS_PHI = 0.05   # velocity nodes with φ below this are gas for run.cfl_gas (the interface's outer tail, ≈ 3ε out)
 
 
+def phase_field_state(pf) -> tuple:
+    """Copies of what a step changes in the PhaseField ``pf``: φ, φⁿ, φⁿ⁻¹, the steps done and the
+    outflow (:func:`set_phase_field_state`)."""
+    return (pf.phi.x.array.copy(), pf.phi_n.x.array.copy(), pf.phi_nm1.x.array.copy(), pf.steps_done,
+            pf.outflow_total)
+
+
+def set_phase_field_state(pf, state: tuple) -> None:
+    """Inverse of :func:`phase_field_state`."""
+    phi, phi_n, phi_nm1, pf.steps_done, pf.outflow_total = state
+    pf.phi.x.array[:], pf.phi_n.x.array[:], pf.phi_nm1.x.array[:] = phi, phi_n, phi_nm1
+
+
 def mass_defect_term(rho_rate: fem.Function):
     """The Navier–Stokes term ½ (∂ρ/∂t + ∇·(ρa))·u_θ·w (``fluid.mass_consistent_convection``).
 
@@ -146,6 +159,7 @@ class TwoPhaseModel:
         self.output_functions = [self.pf.phi, self.u_out, self.p_out, self.rho]
         self.last_dt = case.run.dt
         self.ns_iterations = self.pf_iterations = 0
+        self._taken = None      # ((step, t, Δt), φ state after it, iterations) of the last step taken (advance)
         self._boundary_forms(tagged)
         self.set_output()              # the initial output: the static pressure where there is one
 
@@ -204,17 +218,29 @@ class TwoPhaseModel:
             self.pf.use_cut(cut)
 
     # -------------------------------------------------------------- time step
-    def advance(self, t: float, dt: float, timer: StageTimer) -> None:
+    def advance(self, t: float, dt: float, timer: StageTimer, retake: bool = False) -> None:
+        """One step of φ, then of the flow. ``retake``: the step is taken again from the same start
+        on the same cut (an implicit coupling's later pass, whose wall velocity alone differs): φ
+        moves inside the bodies with their motion at the start of the step
+        (``CutDomain.rigid_inside``), so it is the last take's, which is kept, and so are ρ, μ
+        and the flow's matrix (``NavierStokes.step``)."""
         ns, pf = self.ns, self.pf
         vm = ns.V_map
+        key = (ns.step_count, ns.t, dt)
+        kept = self._taken if retake and self._taken is not None and self._taken[0] == key else None
         with timer("phase field"):
-            first = ns.step_count == 0
-            u_n = ns.U.x.array[vm]
-            self.u_adv.x.array[:] = u_n if first else 1.5 * u_n - 0.5 * ns.U_n.x.array[vm]
-            if self.cut is not None:
-                self.cut.rigid_inside(self.u_adv.x.array, self.ns.V)
             phi_old = pf.phi.x.array.copy()
-            self.pf_iterations = pf.advance(dt)
+            if kept is None:
+                first = ns.step_count == 0
+                u_n = ns.U.x.array[vm]
+                self.u_adv.x.array[:] = u_n if first else 1.5 * u_n - 0.5 * ns.U_n.x.array[vm]
+                if self.cut is not None:
+                    self.cut.rigid_inside(self.u_adv.x.array, self.ns.V)
+                self.pf_iterations = pf.advance(dt)
+                self._taken = (key, phase_field_state(pf), self.pf_iterations)
+            else:
+                set_phase_field_state(pf, kept[1])
+                self.pf_iterations = kept[2]
             if self.rho_rate is not None:
                 fl = self.case.fluid
                 self.rho_rate.x.array[:] = (property_map(pf.phi.x.array, fl.density, fl.gas_density)
@@ -224,7 +250,7 @@ class TwoPhaseModel:
         with timer("navier-stokes"):
             ns.dt.value = dt
             try:
-                info = ns.step()
+                info = ns.step(same_operator=kept is not None)
             except NonlinearSolveError as err:
                 raise SimulationDiverged(str(err)) from err
             self.ns_iterations = info.iterations
@@ -301,18 +327,14 @@ class TwoPhaseModel:
 
     def snapshot(self) -> tuple:
         """What a step changes (flow, φ with its history and outflow), to take it again."""
-        pf = self.pf
-        return (ns_snapshot(self.ns), self.last_dt, (pf.phi.x.array.copy(), pf.phi_n.x.array.copy(),
-                                                     pf.phi_nm1.x.array.copy(), pf.steps_done, pf.outflow_total))
+        return ns_snapshot(self.ns), self.last_dt, phase_field_state(self.pf)
 
     def restore(self, snap: tuple) -> None:
         """Inverse of :meth:`snapshot` (ρ, μ from the restored φ)."""
-        ns, self.last_dt, (phi, phi_n, phi_nm1, steps, outflow) = snap
+        ns, self.last_dt, phase = snap
         ns_restore(self.ns, ns)
-        pf = self.pf
-        pf.steps_done, pf.outflow_total = steps, outflow
-        pf.phi.x.array[:], pf.phi_n.x.array[:], pf.phi_nm1.x.array[:] = phi, phi_n, phi_nm1
-        self.update_properties(phi)
+        set_phase_field_state(self.pf, phase)
+        self.update_properties(self.pf.phi.x.array)
 
     def state(self):
         fields, globals_ = self.pf.state()

@@ -60,6 +60,27 @@ def test_layered_water_and_air_give_the_weight_of_the_column(dim):
                                rtol=0, atol=1e-4)
 
 
+def test_points_asked_again_keep_their_columns_and_get_the_values_of_a_fresh_call():
+    """A coupled step asks for the static pressure at the same points once per implicit pass:
+    their columns and stencils are kept (for two sets of points), and the values are those of a
+    ColumnPressure that builds them anew, to the bit, for new pressures and densities."""
+    msh = _mesh(3)
+    V = fem.FunctionSpace(msh, ("Lagrange", 1))
+    rho, p = fem.Function(V), fem.Function(V)
+    column, fresh = ColumnPressure(msh, [0.0, 0.0, -G], 0.02), ColumnPressure(msh, [0.0, 0.0, -G], 0.02)
+    rng = np.random.default_rng(3)
+    a, b = (rng.uniform([0.0, 0.0, 0.0], [0.3, 0.2, TOP], (40 + 10 * MPI.COMM_WORLD.rank, 3)) for _ in range(2))
+    for k, pts in enumerate([a, b, a, b, a]):
+        rho.interpolate(lambda x, k=k: np.where(x[2] <= INTERFACE + 0.01 * k, RHO_L, RHO_A))
+        p.interpolate(lambda x, k=k: 50.0 * k + 30.0 * x[0])
+        got = column.values(pts, p, rho, with_density=True)
+        fresh._geometry = []
+        want = fresh.values(pts, p, rho, with_density=True)
+        for g, w in zip(got, want):
+            np.testing.assert_array_equal(g, w)
+    assert len(column._geometry) == 2
+
+
 def test_the_column_integral_is_the_trapezoidal_rule_from_the_first_level_in_the_mesh():
     """NumPy reference: levels above the mesh add nothing; a level below the mesh's edge keeps
     the density of the last one in it."""

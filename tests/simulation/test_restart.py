@@ -515,12 +515,12 @@ def test_a_failed_two_phase_step_is_retaken_as_two_half_steps(tmp_path):
     model = TwoPhaseModel(case, MPI.COMM_WORLD)
     real, calls = model.ns.step, []
 
-    def failing_second_step():
+    def failing_second_step(**kw):
         calls.append(float(model.ns.dt.value))
         if len(calls) == 2:
-            real()                                   # leave a half-updated state behind
+            real(**kw)                               # leave a half-updated state behind
             raise NonlinearSolveError(2, 0.004, [1.0], "injected failure")
-        return real()
+        return real(**kw)
     model.ns.step = failing_second_step
     TimeLoop(case, model, tmp_path, MPI.COMM_WORLD, None).run()
     assert calls == pytest.approx([0.01, 0.01, 0.005, 0.005, 0.01])
