@@ -75,6 +75,8 @@ class StepInfo:
 ExtraTerm = Callable[[FormParts], "ufl.Form"]
 
 CHORD_CONTRACTION = 0.1   # a warm-started step keeps its Jacobian while each Newton step cuts ‖R‖ by this
+#: the loosest relative tolerance of a retaken step's correction solve (``retake_tolerance``)
+RETAKE_RTOL_MAX = 1e-2
 
 
 def velocity_pressure_space(mesh) -> fem.FunctionSpace:
@@ -132,7 +134,14 @@ class NavierStokes:
     static_pressure: a known pressure field Π (e.g. the P2 hydrostatic part of
         :mod:`.hydrostatic`); the unknown is then p' and every term uses p' + Π.
     retaken_steps: the caller takes steps again with the same Δt (an implicit coupling's passes,
-        :meth:`warm_start`): each linearised solve keeps the residual it left for them.
+        :meth:`warm_start`): a linearised step's Krylov solve keeps its update and the residual it
+        left, and a retaken step solves for the correction of that update (:meth:`_krylov_system`).
+    retake_tolerance: the relative change of the data (an implicit coupling's wall velocity) below
+        which the caller stops taking a step again (``coupling.iteration_tol``): a retaken step's
+        correction is solved until its residual is within this fraction of its right-hand side (not
+        tighter than the Krylov rtol, not looser than :data:`RETAKE_RTOL_MAX`) and within the Krylov
+        rtol of the step's full right-hand side (:meth:`_correction_rtol`); without it, to the
+        Krylov rtol of its own right-hand side.
     """
 
     def __init__(self, mesh, config: FluidConfig, dt: float, *, facet_tags=None,
@@ -141,7 +150,7 @@ class NavierStokes:
                  extra_bcs: Sequence[fem.DirichletBC] = (),
                  velocity_functions: dict[str, Callable] | None = None, petsc_prefix: str = "ns_",
                  petsc_options: dict | None = None, pspg_density=None, static_pressure=None,
-                 cell_viscosity=None, retaken_steps: bool = False) -> None:
+                 cell_viscosity=None, retaken_steps: bool = False, retake_tolerance: float | None = None) -> None:
         self.mesh, self.config, self.comm = mesh, config, mesh.comm
         gdim = mesh.geometry.dim
         self.gdim = gdim
@@ -212,10 +221,15 @@ class NavierStokes:
         # fluid.krylov_start: extrapolated: the linearised step's Krylov solve starts from its update
         # extrapolated from the last steps'
         krylov = opts.get("ksp_type") != "preonly"
+        self._krylov = krylov
         self.increments = IncrementHistory() if krylov and config.krylov_start == "extrapolated" else None
         self._correction = None        # (rhs, solution) work vectors of a retaken step's correction solve
-        self._leftover = None          # (step, Δt, b − A dU) the last linearised solve left
+        self._leftover = None          # (step, Δt, b − A dU, dU): the step's first solve's residual, the last update
         self.retaken_steps = retaken_steps
+        self.retake_rtol = None        # relative tolerance of a retaken step's correction solve
+        if retake_tolerance is not None and krylov:
+            rtol = self.ksp.getTolerances()[0]
+            self.retake_rtol = min(max(retake_tolerance, rtol), RETAKE_RTOL_MAX)
         self._operator_of = None       # (step, Δt) whose coefficients the assembled A holds (linearised step)
 
     def field_index_sets(self) -> dict[str, PETSc.IS]:
@@ -495,16 +509,19 @@ class NavierStokes:
             raise NonlinearSolveError(self.step_count, self.t, info.residuals, "residual is not finite (NaN/inf)")
         if r > self.config.atol:
             dt = float(self.dt.value)
-            start = None if self.increments is None else self.increments.guess(self.step_count, dt)
-            # taken before with this Δt (an implicit coupling's later pass): its last solve's leftover is kept
+            # taken before with this Δt (an implicit coupling's later pass): the correction of the last update
             retaken = self._leftover is not None and self._leftover[:2] == (self.step_count, dt)
+            if retaken:
+                start = self._leftover[3]
+            else:
+                start = None if self.increments is None else self.increments.guess(self.step_count, dt)
             kept = same_operator and self._operator_of == (self.step_count, dt)
             self._update(info, assemble=not kept, reuse=keep, start=start, from_start=retaken)
             self._operator_of = (self.step_count, dt)
             if self.increments is not None:
                 self.increments.record(self.step_count, dt, self.dU.x.array)
-                if self.retaken_steps:
-                    self._keep_leftover(dt)
+            if self.retaken_steps and self._krylov:
+                self._keep_leftover(dt, retaken)
             info.iterations = 1
         self.history.append(info)
         return info
@@ -524,12 +541,18 @@ class NavierStokes:
         reuse = bool(self.reuse_preconditioner and (reuse or self._preconditioner_still_good()))
         self.ksp.getPC().setReusePreconditioner(reuse)
         if rhs is not None:
-            solvers.solve(self.ksp, rhs, x)
-            if reuse and self.ksp.getConvergedReason() < 0:   # the kept preconditioner has gone stale
-                info.krylov_iterations += self.ksp.getIterationNumber()
-                self.ksp.getPC().setReusePreconditioner(False)
+            tolerances = self.ksp.getTolerances()
+            if x is not self.dU.vector and self.retake_rtol is not None:   # a retaken step's correction
+                self.ksp.setTolerances(rtol=self._correction_rtol(rhs, tolerances[0]))
+            try:
                 solvers.solve(self.ksp, rhs, x)
-                reuse = False
+                if reuse and self.ksp.getConvergedReason() < 0:   # the kept preconditioner has gone stale
+                    info.krylov_iterations += self.ksp.getIterationNumber()
+                    self.ksp.getPC().setReusePreconditioner(False)
+                    solvers.solve(self.ksp, rhs, x)
+                    reuse = False
+            finally:
+                self.ksp.setTolerances(*tolerances)
             self._last_krylov = self.ksp.getIterationNumber()
             solvers.check_converged(self.ksp, self.step_count, self.t, atol=self.config.atol)
             info.krylov_iterations += self.ksp.getIterationNumber()
@@ -550,16 +573,18 @@ class NavierStokes:
         of the steps, yet the solves need fewer iterations (21.7 per step against 26.1 from zero);
         under the stopping rule ‖b − A dU‖ ≤ rtol ‖b‖ a poor start costs iterations, never accuracy.
 
-        ``from_start`` (the step taken again with the same Δt: an implicit coupling's later pass,
-        whose data differ from the last pass's in the wall velocity): ``start`` is the last pass's
-        update dU₀, which left the residual e₀ = b₀ − A₀ dU₀ (:meth:`_keep_leftover`), and the
-        solve is for the correction J δ = (R − J dU₀) − e₀, from zero to rtol of its own right-hand
-        side; dU = dU₀ + δ leaves the same e₀. So the passes differ by the response of the flow to
-        the change of their data, resolved to rtol of that change, and the Krylov error of the first
-        pass is the same in every pass. (Started from dU₀ under the rule above, a pass whose data
-        differ by less than rtol ‖b‖ accepted dU₀ untouched, and the coupling iterated on a flow
-        that did not respond to the wall velocity.) A correction whose right-hand side is within the
-        step's ``atol`` or at round-off (1e-12 ‖b‖) is zero: returns (None, None)."""
+        ``from_start`` (the step taken again with the same Δt by a Krylov solver with
+        ``retaken_steps``: an implicit coupling's later pass, whose data differ from the last pass's
+        in the wall velocity): ``start`` is the last pass's update dU₀; the step's first solve left
+        the residual e₀ = b₀ − A₀ dU (:meth:`_keep_leftover`), and the solve is for the correction
+        J δ = (R − J dU₀) − e₀, from zero to its tolerance (:meth:`_correction_rtol`, or the Krylov
+        rtol of its own right-hand side); dU = dU₀ + δ leaves e₀ and that solve's own error, which
+        the next pass's right-hand side contains and corrects. So the passes differ by the response
+        of the flow to the change of their data, resolved to that tolerance, and the Krylov error of
+        the first pass is the same in every pass. (Started from dU₀ under the rule above, a pass
+        whose data differ by less than rtol ‖b‖ accepted dU₀ untouched, and the coupling iterated on
+        a flow that did not respond to the wall velocity.) A correction whose right-hand side is
+        within the step's ``atol`` or at round-off (1e-12 ‖b‖) is zero: returns (None, None)."""
         if start is None or not from_start:
             if start is not None:
                 self.dU.x.array[:] = start
@@ -578,12 +603,24 @@ class NavierStokes:
         self.ksp.setInitialGuessNonzero(False)
         return rhs, x
 
-    def _keep_leftover(self, dt: float) -> None:
-        """Keep the residual b − A dU the solve just left (:meth:`_krylov_system`)."""
+    def _correction_rtol(self, rhs: PETSc.Vec, rtol: float) -> float:
+        """Relative tolerance of a retaken step's correction solve with right-hand side ``rhs``:
+        its residual within both ``retake_rtol`` ‖rhs‖ (the response to the change resolved as far
+        as the caller resolves the change) and rtol ‖b‖ (the flow as accurate as the step's first
+        solve left it, the Krylov ``rtol`` of the full right-hand side b)."""
+        r = rhs.norm()
+        return min(self.retake_rtol, rtol * self.b.norm() / r) if r > 0 else self.retake_rtol
+
+    def _keep_leftover(self, dt: float, retaken: bool) -> None:
+        """Keep the update dU the solve just gave and, after the step's first solve (not
+        ``retaken``), the residual b − A dU it left (:meth:`_krylov_system`)."""
+        if retaken:
+            self._leftover[3][:] = self.dU.x.array
+            return
         e = self.b.duplicate() if self._leftover is None else self._leftover[2]
         self.A.mult(self.dU.vector, e)
         e.aypx(-1.0, self.b)
-        self._leftover = (self.step_count, dt, e)
+        self._leftover = (self.step_count, dt, e, self.dU.x.array.copy())
 
     def _preconditioner_still_good(self) -> bool:
         """At a step's first solve: keep the preconditioner of an earlier step when

@@ -140,7 +140,8 @@ class CoupledModel:
         plain_degree = quadrature_degree(case.fluid, field_properties=case.phase_field is not None)
         cut = CutDomain(self.mesh, alpha=cp.fictitious_factor, penalty=cp.penalty, wall=cp.wall,
                         extension=cp.cut_extension, slip=cp.wall_slip, plain_degree=plain_degree)
-        ns_options = {"dx": cut.dx, "extra_terms": [cut.penalty_term()], "retaken_steps": cp.iterations > 1}
+        ns_options = {"dx": cut.dx, "extra_terms": [cut.penalty_term()], "retaken_steps": cp.iterations > 1,
+                      "retake_tolerance": cp.iteration_tol if cp.iterations > 1 else None}
         fluid_case = dataclasses.replace(case, fluid=dataclasses.replace(case.fluid, quadrature_degree=cut.degree))
         if case.phase_field is not None:
             from .two_phase import TwoPhaseModel
