@@ -176,6 +176,32 @@ class NearPairs:
         self._x = None                      # (n, 3) the points when their body's pairs were searched
         self._i = self._j = np.zeros(0, np.int64)
         self.searched_bodies = 0            # bodies searched again at the last call
+        self.searched_points = 0            # points in the tree the moved bodies' points were searched in
+        self._order = np.argsort(self.body, kind="stable")          # the points body by body
+        ids, self._starts = np.unique(self.body[self._order], return_index=True)
+        self._ids = ids
+
+    def _boxes(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per body (0 … max id) the bounding box (lower, upper) of its points at ``x``; empty
+        bodies get an inverted box."""
+        nb = int(self.body.max(initial=-1)) + 1
+        lo, hi = np.full((nb, 3), np.inf), np.full((nb, 3), -np.inf)
+        if len(self._ids):
+            xs = x[self._order]
+            lo[self._ids] = np.minimum.reduceat(xs, self._starts, axis=0)
+            hi[self._ids] = np.maximum.reduceat(xs, self._starts, axis=0)
+        return lo, hi
+
+    def _within_reach(self, x: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """Indices of the points whose body's box comes within ``radius`` + ``margin`` of a
+        ``moved`` body's box: every point a moved body's point can pair with."""
+        lo, hi = self._boxes(x)
+        reach = self.radius + self.margin
+        mlo, mhi = lo[moved] - reach, hi[moved] + reach
+        near = np.zeros(len(lo), bool)
+        for a, b in zip(mlo, mhi):
+            near |= np.all((lo <= b) & (hi >= a), axis=1)
+        return np.flatnonzero(near[self.body])
 
     def pairs(self, x: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(i, j, d²) with i < j, of the ``active`` points (n,) of different bodies closer than
@@ -192,9 +218,11 @@ class NearPairs:
             stale = moved[self.body[self._i]] | moved[self.body[self._j]]
             i, j = self._i[~stale], self._j[~stale]
             mine = np.flatnonzero(moved[self.body])
-            hits = cKDTree(x[mine]).sparse_distance_matrix(cKDTree(x), self.radius + self.margin,
+            reach = self._within_reach(x, moved) if self._x is not None else np.arange(len(x))
+            self.searched_points = len(reach)
+            hits = cKDTree(x[mine]).sparse_distance_matrix(cKDTree(x[reach]), self.radius + self.margin,
                                                            output_type="ndarray")
-            ni, nj = mine[hits["i"]], hits["j"].astype(np.int64)
+            ni, nj = mine[hits["i"]], reach[hits["j"]].astype(np.int64)
             cross = self.body[ni] != self.body[nj]
             a, b = np.minimum(ni[cross], nj[cross]), np.maximum(ni[cross], nj[cross])
             new = np.unique(a * len(x) + b)             # a pair of two moved bodies is found twice

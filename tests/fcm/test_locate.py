@@ -59,12 +59,14 @@ def test_kept_cells_are_the_search_s_cells_as_points_move(dim):
 
 
 def test_near_pairs_equal_a_fresh_search_as_bodies_move():
-    """Points of 12 bodies, some bodies moved at each call (slowly: pairs kept; fast: searched
-    again): the pairs of different bodies closer than the radius among the active points equal
-    a fresh KD-tree search, and bodies at rest are not searched again."""
+    """Points of 12 bodies side by side, some bodies moved at each call (slowly: pairs kept; fast:
+    searched again): the pairs of different bodies closer than the radius among the active points
+    equal a fresh KD-tree search, bodies at rest are not searched again, and a moved body's
+    points are searched among the bodies within its reach only."""
     rng = np.random.default_rng(7)
     body = np.repeat(np.arange(12), 150)
-    x = rng.uniform(0.0, 1.0, (len(body), 3))
+    corner = 0.28 * np.stack(np.unravel_index(np.arange(12), (4, 3, 1)), axis=1)   # boxes that overlap a little
+    x = corner[body] + rng.uniform(0.0, 0.3, (len(body), 3))
     near = NearPairs(body, radius=0.08, margin=0.04)
     for step in range(6):
         if step:
@@ -79,10 +81,11 @@ def test_near_pairs_equal_a_fresh_search_as_bodies_move():
         a, b = idx[ref[:, 0]], idx[ref[:, 1]]
         other = body[a] != body[b]
         expect = sorted(zip(np.minimum(a, b)[other].tolist(), np.maximum(a, b)[other].tolist()))
-        assert sorted(zip(i.tolist(), j.tolist())) == expect
+        assert len(expect) > 100 and sorted(zip(i.tolist(), j.tolist())) == expect
         np.testing.assert_allclose(d2, np.sum((x[i] - x[j]) ** 2, axis=1))
         if step:
             assert near.searched_bodies <= 2
+            assert near.searched_points < len(x)        # only the bodies the moved ones can reach
 
 
 def test_close_active_pairs_kernel_equals_its_numpy_twin():
