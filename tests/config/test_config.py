@@ -145,7 +145,7 @@ def test_command_line_overrides_win_over_the_resolution_level():
     value (a regression once seen); --set can still pick and edit the level itself."""
     path = ROOT / "cases" / "tsunami_building.yaml"
     coarse = load_case(path)
-    assert coarse.dem.dt == 5.0e-5 and coarse.fluid.nonlinear == "linearised"
+    assert coarse.dem.dt == 1.0e-4 and coarse.fluid.nonlinear == "linearised"
     case = load_case(path, ["dem.dt=2.0e-5", "fluid.nonlinear=newton",
                             "fluid.petsc={ksp_type: gmres, pc_type: bjacobi}"])
     assert case.dem.dt == 2.0e-5 and case.fluid.nonlinear == "newton"
