@@ -52,6 +52,10 @@ from .dem_side import block_volume
 POISSON_2D = dict(DIRECT_LU)
 POISSON_3D = {"ksp_type": "cg", "ksp_rtol": 1e-6, "ksp_max_it": 2000, "pc_type": "hypre",
               "pc_hypre_type": "boomeramg"}
+#: 3D Laplacians with at most this many unknowns are factorised (POISSON_2D's LU) instead: a
+#: step's factorisation and its 6 solves per moving group cost less than BoomerAMG's set-up and
+#: CG there
+POISSON_3D_DIRECT_LIMIT = 50_000
 
 
 def rigid_modes(gdim: int) -> int:
@@ -91,7 +95,8 @@ class PotentialAddedMass:
             dofs = np.array([int(np.argmin(d))], np.int32) if self.comm.rank == best[1] else np.zeros(0, np.int32)
         self._bc = fem.dirichletbc(PETSc.ScalarType(0.0), dofs, S1)
         self._A = fem.petsc.create_matrix(self._a.form)
-        self._ksp = make_ksp(self.comm, self._A, "added_mass_", POISSON_2D if gdim == 2 else POISSON_3D)
+        direct = gdim == 2 or S1.dofmap.index_map.size_global <= POISSON_3D_DIRECT_LIMIT
+        self._ksp = make_ksp(self.comm, self._A, "added_mass_", POISSON_2D if direct else POISSON_3D)
         # C_f: rows DG0 (cells), columns P1; f = n_j (j < gdim), then (x × n) (1 in 2D, 3 in 3D)
         D0 = fem.FunctionSpace(mesh, ("DG", 0))
         v0 = ufl.TestFunction(D0)
