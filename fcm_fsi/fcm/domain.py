@@ -35,7 +35,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from .. import jit
-from .moments import fitted_weights
+from .moments import MomentInverses, fitted_weights
 
 #: quadrature degree of all fluid forms on a cut mesh: the smallest standard rule with at
 #: least as many points as monomials of degree ≤ 2 (2D: 7 points ≥ 6; 3D: 14 points ≥ 10)
@@ -147,6 +147,7 @@ class CutGeometry:
         self.body_cells = np.zeros(ncells, bool)
         self.fluid_measure = np.zeros(ncells)
         self.surface_measure = np.zeros(ncells)
+        self._moment_inverses = MomentInverses(ncells)   # of the cells cut so far (the mesh is fixed)
 
     @property
     def fluid_fraction(self):
@@ -177,7 +178,7 @@ class CutGeometry:
         allreduce)."""
         values = np.ascontiguousarray(level[self.geom_cells])
         cv, cs, self.fluid_measure, self.surface_measure = fitted_weights(
-            self.cell_coords, values, self.ref_points, self.ref_weights)
+            self.cell_coords, values, self.ref_points, self.ref_weights, self._moment_inverses)
         a = self.alpha
         self.volume_weight.x.array[self.q_dofs] = (1 - a) * cv + a
         self.surface_weight.x.array[self.q_dofs] = cs

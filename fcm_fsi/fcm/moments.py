@@ -192,22 +192,91 @@ def _cut_moments(x, s, centre, scale, mv, ms, tmp):
 
 
 @numba.njit(cache=True)
-def _fit(A, m, w0, w):
-    """w = w0 + dw, dw the least-norm solution of A dw = m − A w0 (SVD, so near-degenerate
-    cells do not square the condition number): the weights closest to w0 with moments m."""
-    dw = np.linalg.lstsq(A, m - A @ w0)[0]
-    w[:] = w0 + dw
+def _point_monomials(x, ref_points, centre, scale, A, xq, tmp):
+    """A (nm, nq): the monomials of the cell-local scaled coordinates at the standard points
+    of the cell with vertices x, x = x0 + Σ_k ξ_k (x_k − x0)."""
+    gdim = x.shape[1]
+    for q in range(ref_points.shape[0]):
+        for d in range(gdim):
+            xq[d] = x[0, d]
+            for k in range(gdim):
+                xq[d] += ref_points[q, k] * (x[k + 1, d] - x[0, d])
+            xq[d] = (xq[d] - centre[d]) / scale
+        _monomials(xq, tmp)
+        A[:, q] = tmp
 
 
 @numba.njit(cache=True)
-def fitted_weights(coords, values, ref_points, ref_weights):
+def _centre_scale(x):
+    """The cell's vertex centroid and size |K|^(1/gdim), the frame of its scaled monomials."""
+    nv, gdim = x.shape
+    centre = np.zeros(gdim)
+    for i in range(nv):
+        centre += x[i] / nv
+    return centre, _measure(x) ** (1.0 / gdim)
+
+
+@numba.njit(cache=True)
+def moment_pinv(coords, ref_points):
+    """(ncells, nq, nm) the pseudo-inverse of each cell's moment matrix A (nm, nq), the scaled
+    monomials at its standard points (by SVD, so near-degenerate cells do not square the
+    condition number). A depends on the cell's geometry only: a fixed mesh computes it once per
+    cell (:class:`MomentInverses`)."""
+    n, nv, gdim = coords.shape
+    nq = ref_points.shape[0]
+    nm = _n_monomials(gdim)
+    out = np.empty((n, nq, nm))
+    A = np.empty((nm, nq))
+    xq = np.empty(gdim)
+    tmp = np.empty(nm)
+    for c in range(n):
+        centre, scale = _centre_scale(coords[c])
+        _point_monomials(coords[c], ref_points, centre, scale, A, xq, tmp)
+        out[c] = np.linalg.pinv(A)
+    return out
+
+
+class MomentInverses:
+    """The moment matrices' pseudo-inverses (:func:`moment_pinv`) of the cells of a fixed mesh
+    that have been cut, computed when a cell is first cut and kept (nq × nm numbers per such
+    cell: 1.1 kB for a tetrahedron's 14 points)."""
+
+    def __init__(self, ncells: int) -> None:
+        self.slot = np.full(ncells, -1, np.int64)     # row of each cell in ``pinv``, −1 not yet cut
+        self.pinv = None
+
+    def of(self, coords: np.ndarray, values: np.ndarray, ref_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(slot, pinv) with every cell that ``values`` (ncells, nv) cuts in it; ``coords``
+        (ncells, nv, gdim) the cells' vertices."""
+        cut = (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
+        new = np.flatnonzero(cut & (self.slot < 0))
+        if new.size or self.pinv is None:
+            fresh = moment_pinv(np.ascontiguousarray(coords[new]), ref_points)
+            start = 0 if self.pinv is None else len(self.pinv)
+            self.slot[new] = start + np.arange(len(new))
+            self.pinv = fresh if self.pinv is None else np.concatenate([self.pinv, fresh])
+        return self.slot, self.pinv
+
+
+def fitted_weights(coords, values, ref_points, ref_weights, inverses: MomentInverses | None = None):
     """Moment-fitted volume and surface weight factors per cell and quadrature point.
 
     coords (ncells, nv, gdim) vertex coordinates [m]; values (ncells, nv) level set at the
     vertices (fluid where ≥ 0); ref_points (nq, tdim), ref_weights (nq,) the standard rule
-    on the reference simplex. Returns (cv, cs, fluid, surface): factors (ncells, nq) and
-    the exact fluid measure and cut-surface measure of each cell.
+    on the reference simplex; ``inverses`` the cells' kept moment inverses (a fixed mesh cut
+    again and again), else computed for this call. Returns (cv, cs, fluid, surface): factors
+    (ncells, nq) and the exact fluid measure and cut-surface measure of each cell.
     """
+    inverses = MomentInverses(len(coords)) if inverses is None else inverses
+    slot, pinv = inverses.of(coords, values, ref_points)
+    return _fitted_weights(coords, values, ref_points, ref_weights, slot, pinv)
+
+
+@numba.njit(cache=True)
+def _fitted_weights(coords, values, ref_points, ref_weights, slot, pinv):
+    """:func:`fitted_weights` with the cut cells' moment inverses ``pinv[slot[c]]``: the
+    weights w = w0 + A⁺ (m − A w0), the least-norm change of the scaled standard weights w0
+    that gives the moments m."""
     n, nv, gdim = coords.shape
     nq = ref_points.shape[0]
     nm = _n_monomials(gdim)
@@ -221,7 +290,7 @@ def fitted_weights(coords, values, ref_points, ref_weights):
     A = np.empty((nm, nq))
     xq = np.empty(gdim)
     w0 = np.empty(nq)
-    w = np.empty(nq)
+    r = np.empty(nm)
     for c in range(n):
         x = coords[c]
         s = values[c]
@@ -233,33 +302,29 @@ def fitted_weights(coords, values, ref_points, ref_weights):
             continue
         if npos == 0:
             continue
-        centre = np.zeros(gdim)
-        for i in range(nv):
-            centre += x[i] / nv
-        scale = full ** (1.0 / gdim)
+        centre, scale = _centre_scale(x)
         vol, area = _cut_moments(x, s, centre, scale, mv, ms, tmp)
         fluid[c], surface[c] = vol, area
-        # standard points in the physical cell, x = x0 + Σ_k ξ_k (x_k − x0)
-        for q in range(nq):
-            for d in range(gdim):
-                xq[d] = x[0, d]
-                for k in range(gdim):
-                    xq[d] += ref_points[q, k] * (x[k + 1, d] - x[0, d])
-                xq[d] = (xq[d] - centre[d]) / scale
-            _monomials(xq, tmp)
-            A[:, q] = tmp
+        _point_monomials(x, ref_points, centre, scale, A, xq, tmp)
+        P = pinv[slot[c]]
         det = full / ref_weights.sum()     # |det J| = |K| / |K̂|
-        for q in range(nq):
-            w0[q] = ref_weights[q] * det * (vol / full)
-        _fit(A, mv, w0, w)
-        for q in range(nq):
-            cv[c, q] = w[q] / (ref_weights[q] * det)
-        if area > 0.0:
+        for part in range(2):
+            if part == 1 and area <= 0.0:
+                break
+            m = mv if part == 0 else ms
+            share = vol if part == 0 else area
             for q in range(nq):
-                w0[q] = ref_weights[q] * det * (area / full)
-            _fit(A, ms, w0, w)
+                w0[q] = ref_weights[q] * det * (share / full)
+            for i in range(nm):
+                r[i] = m[i]
+                for q in range(nq):
+                    r[i] -= A[i, q] * w0[q]
+            out = cv if part == 0 else cs
             for q in range(nq):
-                cs[c, q] = w[q] / (ref_weights[q] * det)
+                w = w0[q]
+                for i in range(nm):
+                    w += P[q, i] * r[i]
+                out[c, q] = w / (ref_weights[q] * det)
     return cv, cs, fluid, surface
 
 

@@ -20,7 +20,13 @@ from fcm_fsi.dem.bodies import axis_angle_quat
 from fcm_fsi.fcm.cut import cut_measures
 from fcm_fsi.fcm.domain import CUT_QUADRATURE_DEGREE
 from fcm_fsi.fcm.levelset import Shapes, StructureLevelSet
-from fcm_fsi.fcm.moments import _hull_moments, _planar_moments, fitted_weights, fitted_weights_reference
+from fcm_fsi.fcm.moments import (
+    MomentInverses,
+    _hull_moments,
+    _planar_moments,
+    fitted_weights,
+    fitted_weights_reference,
+)
 from fcm_fsi.fluid.cut_walls import CutDomain
 from fcm_fsi.fluid.navier_stokes import NavierStokes
 from fcm_fsi.fluid.solvers import ITERATIVE_3D
@@ -111,6 +117,26 @@ def test_kernel_matches_numpy_reference(gdim):
     corners = slice(200, 400)     # fluid part computed directly: relative agreement at any size
     rel = np.abs(cv - cv_ref)[corners].max(axis=1) / np.abs(cv_ref)[corners].max(axis=1)
     assert rel.max() <= 1e-9
+
+
+@pytest.mark.parametrize("gdim", [2, 3])
+def test_kept_moment_inverses_give_the_weights_of_a_fresh_call(gdim):
+    """A fixed mesh cut again and again keeps each cut cell's moment-matrix inverse from the first
+    time it was cut (MomentInverses): new level sets give the weights of a call that computes
+    them anew, to the bit, and only the newly cut cells get inverses."""
+    rng = np.random.default_rng(30 + gdim)
+    x = random_simplices(rng, 300, gdim)
+    pts, wts = reference_rule(gdim)
+    kept = MomentInverses(len(x))
+    for k in range(3):
+        s, _ = level_values(rng, x)
+        s[: 100 * k] = np.abs(s[: 100 * k]) + 1.0        # some cells uncut in this call
+        got = fitted_weights(x, s, pts, wts, kept)
+        want = fitted_weights(x, s, pts, wts)
+        for g, w in zip(got, want):
+            np.testing.assert_array_equal(g, w)
+    cut = (kept.slot >= 0).sum()
+    assert cut == len(kept.pinv) and 0 < cut <= len(x)
 
 
 def random_quadratic(rng, gdim: int, centre: np.ndarray, size: float):
