@@ -35,7 +35,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from .. import jit
-from .moments import MomentInverses, fitted_weights
+from .moments import MomentInverses, cut_cells, fitted_weights
 
 #: quadrature degree of all fluid forms on a cut mesh: the smallest standard rule with at
 #: least as many points as monomials of degree ≤ 2 (2D: 7 points ≥ 6; 3D: 14 points ≥ 10)
@@ -44,11 +44,6 @@ CUT_QUADRATURE_DEGREE = {2: 5, 3: 4}
 #: cell classes of the cut (``CutDomain.cell_tags`` values): every vertex in the fluid, cut by Γ,
 #: every vertex in a body
 FLUID_CELL, CUT_CELL, SOLID_CELL = 0, 1, 2
-
-
-def cut_cells(values: np.ndarray) -> np.ndarray:
-    """Cells (rows of vertex level-set values) that Γ cuts: some vertex in the body, some not."""
-    return (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
 
 
 def cell_classes(values: np.ndarray) -> np.ndarray:

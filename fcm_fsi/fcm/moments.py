@@ -29,6 +29,11 @@ _TET_A = 0.5854101966249685   # 4-point degree-2 tetrahedron rule (Keast)
 _TET_B = 0.1381966011250105
 
 
+def cut_cells(values: np.ndarray) -> np.ndarray:
+    """Cells (rows of vertex level-set values) that Γ cuts: some vertex in the body, some not."""
+    return (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
+
+
 @numba.njit(cache=True)
 def _n_monomials(gdim):
     return 6 if gdim == 2 else 10
@@ -248,8 +253,7 @@ class MomentInverses:
     def of(self, coords: np.ndarray, values: np.ndarray, ref_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(slot, pinv) with every cell that ``values`` (ncells, nv) cuts in it; ``coords``
         (ncells, nv, gdim) the cells' vertices."""
-        cut = (values.min(axis=1) < 0) & (values.max(axis=1) >= 0)
-        new = np.flatnonzero(cut & (self.slot < 0))
+        new = np.flatnonzero(cut_cells(values) & (self.slot < 0))
         if new.size or self.pinv is None:
             fresh = moment_pinv(np.ascontiguousarray(coords[new]), ref_points)
             start = 0 if self.pinv is None else len(self.pinv)
@@ -270,6 +274,25 @@ def fitted_weights(coords, values, ref_points, ref_weights, inverses: MomentInve
     inverses = MomentInverses(len(coords)) if inverses is None else inverses
     slot, pinv = inverses.of(coords, values, ref_points)
     return _fitted_weights(coords, values, ref_points, ref_weights, slot, pinv)
+
+
+@numba.njit(cache=True)
+def _fit_factors(A, P, m, share, det, ref_weights, w0, r, out):
+    """out (nq,) ← the factors w / (ŵ |det J|) of w = w0 + A⁺ (m − A w0), w0 = ŵ |det J| × ``share``
+    (the part's measure over the cell's): the least-norm change of the scaled standard weights that
+    gives the moments m. ``P`` = A⁺; ``w0``, ``r`` work arrays."""
+    nm, nq = A.shape
+    for q in range(nq):
+        w0[q] = ref_weights[q] * det * share
+    for i in range(nm):
+        r[i] = m[i]
+        for q in range(nq):
+            r[i] -= A[i, q] * w0[q]
+    for q in range(nq):
+        w = w0[q]
+        for i in range(nm):
+            w += P[q, i] * r[i]
+        out[q] = w / (ref_weights[q] * det)
 
 
 @numba.njit(cache=True)
@@ -308,23 +331,9 @@ def _fitted_weights(coords, values, ref_points, ref_weights, slot, pinv):
         _point_monomials(x, ref_points, centre, scale, A, xq, tmp)
         P = pinv[slot[c]]
         det = full / ref_weights.sum()     # |det J| = |K| / |K̂|
-        for part in range(2):
-            if part == 1 and area <= 0.0:
-                break
-            m = mv if part == 0 else ms
-            share = vol if part == 0 else area
-            for q in range(nq):
-                w0[q] = ref_weights[q] * det * (share / full)
-            for i in range(nm):
-                r[i] = m[i]
-                for q in range(nq):
-                    r[i] -= A[i, q] * w0[q]
-            out = cv if part == 0 else cs
-            for q in range(nq):
-                w = w0[q]
-                for i in range(nm):
-                    w += P[q, i] * r[i]
-                out[c, q] = w / (ref_weights[q] * det)
+        _fit_factors(A, P, mv, vol / full, det, ref_weights, w0, r, cv[c])
+        if area > 0.0:
+            _fit_factors(A, P, ms, area / full, det, ref_weights, w0, r, cs[c])
     return cv, cs, fluid, surface
 
 
