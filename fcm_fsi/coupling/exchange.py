@@ -50,7 +50,7 @@ class ExchangeStage:
         """The fluid's load on every block after the fluid step to ``t`` [s]; ``pressure`` the
         total pressure field, ``node_density`` a callable giving ρ at the mesh vertices (the
         static load); ``same_poses`` a later pass of the implicit coupling (the flow's added
-        mass is the first pass's)."""
+        mass and the static load are the first pass's)."""
         st = self.dem.system.state
         centres = st.pos[:, : self.gdim] if self.gdim == 2 else st.pos
         force, torque = self.cut.body_forces(st.nb, centres)
@@ -58,7 +58,7 @@ class ExchangeStage:
         self.force[:, : self.gdim] = force * self.depth
         self.torque[:] = torque * self.depth
         if self.hidden is not None:
-            self._move_static_load(pressure, node_density, centres)
+            self._move_static_load(pressure, node_density, centres, same_poses)
         if self.unresolved is not None and self.unresolved.unseen.any():
             out = self.unresolved.unseen
             self.force[out] = self.unresolved.load(st.pos, st.vel, st.rotation_matrices())[out]
@@ -67,13 +67,14 @@ class ExchangeStage:
         labels = self.walls.cluster_labels() if self.added.from_flow else None   # the flow's groups only
         self.added.update(t, labels, same_poses=same_poses)
 
-    def _move_static_load(self, pressure, node_density, centres: np.ndarray) -> None:
+    def _move_static_load(self, pressure, node_density, centres: np.ndarray, later_pass: bool) -> None:
         """``coupling.hidden_pressure``: the block's load becomes the fluid's on Γ minus the
-        static pressure's on Γ plus the static pressure's on the true surface (hidden_load.py)."""
+        static pressure's on Γ plus the static pressure's on the true surface (hidden_load.py;
+        a ``later_pass`` of an implicit step keeps its first pass's static loads)."""
         st = self.dem.system.state
-        density = self.case.fluid.density if self.case.phase_field is None else node_density()
+        density = self.case.fluid.density if self.case.phase_field is None else node_density
         h = self.hidden
-        h.exchange(pressure, density, st.pos, st.rotation_matrices(), centres)
+        h.exchange(pressure, density, st.pos, st.rotation_matrices(), centres, later_pass)
         self.force += h.surface_force - h.cut_force
         self.torque += h.surface_torque - h.cut_torque
         if h.unreached:

@@ -19,7 +19,10 @@ Per cut rebuild (:meth:`HiddenLoad.rebuild`): the share χ of the hidden surface
 the fill sets, the owners of the cut cells, the solid cells, and (``hydrostatic``) the nodes
 at which P is needed and the open-fluid points they read it from. Per exchange
 (:meth:`HiddenLoad.exchange`): P at those nodes from this step's pressure and density, and the
-two loads.
+two loads. A later pass of an implicit step keeps the first pass's loads: it has the same
+density (φ), poses and cut, so P differs only by the change of the pressure at the top of the
+columns (on the tsunami building 1e-4 N of the blocks' 2e4 N static loads, where their loads
+change by 2–30 N from pass to pass).
 """
 from __future__ import annotations
 
@@ -147,14 +150,18 @@ class HiddenLoad:
         take (next to a wall the phase field hugs the wall and the columns through it carry
         its contents)."""
         eps = 1e-3 * self.h_min
-        grad = np.zeros_like(x)
+        near = np.flatnonzero(d < distance)                 # the points that move
+        xn = x[near]
+        grad = np.zeros_like(xn)
         for i in range(self.gdim):
             e = np.zeros(3)
             e[i] = eps
-            grad[:, i] = (self.plain.evaluate(x + e, pos, quat)[0] - self.plain.evaluate(x - e, pos, quat)[0]) / (2 * eps)
+            grad[:, i] = (self.plain.evaluate(xn + e, pos, quat)[0] - self.plain.evaluate(xn - e, pos, quat)[0]) / (2 * eps)
         norm = np.linalg.norm(grad, axis=1)
         n = np.where(norm[:, None] > 0.5, grad / np.maximum(norm, 1e-300)[:, None], 0.0)
-        return x + np.maximum(distance - d, 0.0)[:, None] * n
+        out = x.copy()
+        out[near] += (distance - d[near])[:, None] * n
+        return out
 
     # ------------------------------------------------------------------ per exchange
     def static_pressure(self, p, density):
@@ -177,17 +184,20 @@ class HiddenLoad:
         out.x.array[self._column_of_node[self._nodes]] = np.nan_to_num(moved)
         return out
 
-    def exchange(self, p, node_density: np.ndarray | float, pos: np.ndarray, rot: np.ndarray,
-                 centres: np.ndarray) -> None:
+    def exchange(self, p, node_density, pos: np.ndarray, rot: np.ndarray, centres: np.ndarray,
+                 later_pass: bool = False) -> None:
         """The static pressure's load on the true surface (hidden samples by the gap's
         interpolation) and on Γ per block, from this step's pressure ``p`` (P1) and the
-        density at the mesh vertices ``node_density`` [kg/m³] (a number for one fluid):
-        :attr:`surface_force`, :attr:`surface_torque`, :attr:`cut_force`, :attr:`cut_torque`.
-        The block's load is the fluid's on Γ minus the one on Γ plus the one on the surface.
-        Collective."""
-        density = node_density
-        if not np.isscalar(node_density):
-            self.rho_node.x.array[self.cut.level_dofs] = node_density
+        density at the mesh vertices ``node_density()`` [kg/m³] (a callable; a number for one
+        fluid): :attr:`surface_force`, :attr:`surface_torque`, :attr:`cut_force`,
+        :attr:`cut_torque`. The block's load is the fluid's on Γ minus the one on Γ plus the one
+        on the surface. ``later_pass``: a later pass of an implicit step keeps the loads of its
+        first (module docstring). Collective."""
+        if later_pass:
+            return
+        density = node_density() if callable(node_density) else node_density
+        if not np.isscalar(density):
+            self.rho_node.x.array[self.cut.level_dofs] = density
             density = self.rho_node
         pressure = self.static_pressure(p, density)
         self.surface_force, self.surface_torque = self.surface.load(

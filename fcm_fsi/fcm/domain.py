@@ -221,12 +221,16 @@ class CutGeometry:
         of static shapes count for none. Local."""
         own = self.n_owned
         owner, second, w = self.cell_owner[:own], self.cell_second[:own], self.cell_share[:own]
-        out = np.zeros((nbodies,) + cellwise.shape[1:])
         mask = owner >= 0
-        np.add.at(out, owner[mask], cellwise[mask] * (1.0 - w[mask]).reshape((-1,) + (1,) * (cellwise.ndim - 1)))
         shared = mask & (w > 0)
-        np.add.at(out, second[shared], cellwise[shared] * w[shared].reshape((-1,) + (1,) * (cellwise.ndim - 1)))
-        return out
+        # the owners' parts, then the second bodies' shares, summed in that order (np.add.at's, faster)
+        body = np.concatenate([owner[mask], second[shared]])
+        factor = np.concatenate([1.0 - w[mask], w[shared]])
+        k = int(np.prod(cellwise.shape[1:], dtype=np.int64))
+        values = np.concatenate([cellwise[mask], cellwise[shared]]).reshape(len(body), k) * factor[:, None]
+        out = np.column_stack([np.bincount(body, weights=values[:, j], minlength=nbodies)
+                               for j in range(values.shape[1])])
+        return out.reshape((nbodies,) + cellwise.shape[1:])
 
     def fluid_volume(self) -> float:
         """∫ 1 over the fluid part by the fitted weights (equals the exact cut measure)."""

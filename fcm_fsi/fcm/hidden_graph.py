@@ -180,8 +180,8 @@ class HiddenGraph:
         self.L = self.B = None
         if self.H.size == 0:
             return
-        C = sp.csr_matrix(conductance)
-        A, B = C[self.H][:, self.H], C[self.H][:, self.W]
+        rows = sp.csr_matrix(conductance)[self.H]
+        A, B = rows[:, self.H], rows[:, self.W]
         to_wet = np.asarray(B.sum(axis=1)).ravel()
         ncomp, label = connected_components(A, directed=False)
         self.reached = (np.bincount(label, weights=to_wet, minlength=ncomp) > 0)[label]
