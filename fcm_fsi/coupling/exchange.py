@@ -63,7 +63,6 @@ class ExchangeStage:
             out = self.unresolved.unseen
             self.force[out] = self.unresolved.load(st.pos, st.vel, st.rotation_matrices())[out]
             self.torque[out] = 0.0
-        self.fluid_side = self._wall_momentum()
         labels = self.walls.cluster_labels() if self.added.from_flow else None   # the flow's groups only
         self.added.update(t, labels, same_poses=same_poses)
 
@@ -109,6 +108,7 @@ class ExchangeStage:
         """:attr:`error` of the step just taken: |fluid impulse the DEM integrated + momentum
         the fluid received| / scale, the added-mass stabilisation taken out; the linear force
         mode compares trapezoids. ``dem_load`` the force (nb, 3) [N] the DEM got."""
+        self.fluid_side = self._wall_momentum()       # of the flow the step ends with (its last pass)
         # with the static load moved, the hidden-surface load is not the fluid's (its reaction is the
         # floor's) and the fill's surface load (the fluid's) is not the block's: compare the fluid's own
         fluid_load = self.force if self.hidden is None else \

@@ -446,7 +446,8 @@ class NavierStokes:
         in :meth:`step`."""
         self.u_nm1.x.array[:] = self.U_n.x.array[self.V_map]
         self.U_n.x.array[:] = self.U.x.array
-        self.update_strain()
+        if not (same_operator and self._operator_of == (self.step_count + 1, float(self.dt.value))):
+            self.update_strain()        # (a retaken linearised step: the same uⁿ, uⁿ⁻¹ and cut, the same G)
         self.t += float(self.dt.value)
         self.step_count += 1
         self.bc_set.update(self.t)
@@ -501,21 +502,22 @@ class NavierStokes:
         exactly; no second residual is assembled. ``same_operator`` (:meth:`step`): the matrix
         assembled for this step and Δt is kept."""
         t0 = time.perf_counter()
-        self.update_tau()
+        dt = float(self.dt.value)
+        kept = same_operator and self._operator_of == (self.step_count, dt)
+        if not kept:                    # (kept: τ of the same advecting velocity, ρ and μ)
+            self.update_tau()
         r = self._assemble_residual()
         info.assembly_seconds += time.perf_counter() - t0
         info.residuals.append(r)
         if not np.isfinite(r):
             raise NonlinearSolveError(self.step_count, self.t, info.residuals, "residual is not finite (NaN/inf)")
         if r > self.config.atol:
-            dt = float(self.dt.value)
             # taken before with this Δt (an implicit coupling's later pass): the correction of the last update
             retaken = self._leftover is not None and self._leftover[:2] == (self.step_count, dt)
             if retaken:
                 start = self._leftover[3]
             else:
                 start = None if self.increments is None else self.increments.guess(self.step_count, dt)
-            kept = same_operator and self._operator_of == (self.step_count, dt)
             self._update(info, assemble=not kept, reuse=keep, start=start, from_start=retaken)
             self._operator_of = (self.step_count, dt)
             if self.increments is not None:
