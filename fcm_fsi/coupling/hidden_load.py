@@ -19,10 +19,7 @@ Per cut rebuild (:meth:`HiddenLoad.rebuild`): the share χ of the hidden surface
 the fill sets, the owners of the cut cells, the solid cells, and (``hydrostatic``) the nodes
 at which P is needed and the open-fluid points they read it from. Per exchange
 (:meth:`HiddenLoad.exchange`): P at those nodes from this step's pressure and density, and the
-two loads. A later pass of an implicit step keeps the first pass's loads: it has the same
-density (φ), poses and cut, so P differs only by the change of the pressure at the top of the
-columns (on the tsunami building 1e-4 N of the blocks' 2e4 N static loads, where their loads
-change by 2–30 N from pass to pass).
+two loads (a later pass of an implicit step keeps the first pass's: exchange.py).
 """
 from __future__ import annotations
 
@@ -184,20 +181,17 @@ class HiddenLoad:
         out.x.array[self._column_of_node[self._nodes]] = np.nan_to_num(moved)
         return out
 
-    def exchange(self, p, node_density, pos: np.ndarray, rot: np.ndarray, centres: np.ndarray,
-                 later_pass: bool = False) -> None:
+    def exchange(self, p, node_density: np.ndarray | float, pos: np.ndarray, rot: np.ndarray,
+                 centres: np.ndarray) -> None:
         """The static pressure's load on the true surface (hidden samples by the gap's
         interpolation) and on Γ per block, from this step's pressure ``p`` (P1) and the
-        density at the mesh vertices ``node_density()`` [kg/m³] (a callable; a number for one
-        fluid): :attr:`surface_force`, :attr:`surface_torque`, :attr:`cut_force`,
-        :attr:`cut_torque`. The block's load is the fluid's on Γ minus the one on Γ plus the one
-        on the surface. ``later_pass``: a later pass of an implicit step keeps the loads of its
-        first (module docstring). Collective."""
-        if later_pass:
-            return
-        density = node_density() if callable(node_density) else node_density
-        if not np.isscalar(density):
-            self.rho_node.x.array[self.cut.level_dofs] = density
+        density at the mesh vertices ``node_density`` [kg/m³] (a number for one fluid):
+        :attr:`surface_force`, :attr:`surface_torque`, :attr:`cut_force`, :attr:`cut_torque`.
+        The block's load is the fluid's on Γ minus the one on Γ plus the one on the surface.
+        Collective."""
+        density = node_density
+        if not np.isscalar(node_density):
+            self.rho_node.x.array[self.cut.level_dofs] = node_density
             density = self.rho_node
         pressure = self.static_pressure(p, density)
         self.surface_force, self.surface_torque = self.surface.load(

@@ -223,7 +223,7 @@ class CutGeometry:
         owner, second, w = self.cell_owner[:own], self.cell_second[:own], self.cell_share[:own]
         mask = owner >= 0
         shared = mask & (w > 0)
-        # the owners' parts, then the second bodies' shares, summed in that order (np.add.at's, faster)
+        # the owners' parts, then the second bodies' shares: the order np.add.at would sum in, by bincount
         body = np.concatenate([owner[mask], second[shared]])
         factor = np.concatenate([1.0 - w[mask], w[shared]])
         k = int(np.prod(cellwise.shape[1:], dtype=np.int64))

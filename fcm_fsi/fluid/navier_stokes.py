@@ -446,7 +446,7 @@ class NavierStokes:
         in :meth:`step`."""
         self.u_nm1.x.array[:] = self.U_n.x.array[self.V_map]
         self.U_n.x.array[:] = self.U.x.array
-        if not (same_operator and self._operator_of == (self.step_count + 1, float(self.dt.value))):
+        if not self._operator_kept(same_operator, self.step_count + 1):
             self.update_strain()        # (a retaken linearised step: the same uⁿ, uⁿ⁻¹ and cut, the same G)
         self.t += float(self.dt.value)
         self.step_count += 1
@@ -503,7 +503,7 @@ class NavierStokes:
         assembled for this step and Δt is kept."""
         t0 = time.perf_counter()
         dt = float(self.dt.value)
-        kept = same_operator and self._operator_of == (self.step_count, dt)
+        kept = self._operator_kept(same_operator, self.step_count)
         if not kept:                    # (kept: τ of the same advecting velocity, ρ and μ)
             self.update_tau()
         r = self._assemble_residual()
@@ -527,6 +527,11 @@ class NavierStokes:
             info.iterations = 1
         self.history.append(info)
         return info
+
+    def _operator_kept(self, same_operator: bool, step: int) -> bool:
+        """Whether step number ``step`` with the current Δt is retaken on the assembled matrix
+        (``same_operator`` and the matrix is that step's and Δt's, :meth:`step`)."""
+        return same_operator and self._operator_of == (step, float(self.dt.value))
 
     def _update(self, info: StepInfo, assemble: bool, reuse: bool, start: np.ndarray | None = None,
                 from_start: bool = False) -> None:
